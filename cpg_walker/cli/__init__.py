@@ -1,0 +1,1 @@
+"""The `cpg-walker` command line."""

@@ -1,0 +1,1 @@
+"""The programmable CPG (pure numpy; never imports rclpy)."""

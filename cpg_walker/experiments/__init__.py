@@ -1,0 +1,1 @@
+"""Paper figures, sweeps and benchmarks; each writes PNG figures and a JSON of numbers."""

@@ -1,0 +1,69 @@
+"""Benchmark driver: runs each registered section and merges the results into one JSON and markdown.
+
+A section is a function `run(quick: bool) -> dict` in its own module; it measures in-process with
+`time.perf_counter`, repeats, and reports medians together with its baseline measured in the same run
+(so ratios hold when the machine's speed drifts). Timing targets live here, never in unit tests.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+# name -> "module:function". Each later issue adds its own section here.
+SECTIONS: dict[str, str] = {
+    "cpg": "cpg_walker.experiments.bench_cpg:run",
+}
+
+
+def _machine() -> dict:
+    import os
+
+    import numpy
+
+    return {
+        "python": sys.version.split()[0],
+        "numpy": numpy.__version__,
+        "platform": platform.platform(),
+        "cpus": os.cpu_count(),
+        "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
+
+
+def _to_markdown(results: dict, prefix: str = "") -> list[str]:
+    lines: list[str] = []
+    for key, value in results.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            lines.extend(_to_markdown(value, name + "."))
+        elif isinstance(value, float):
+            lines.append(f"| `{name}` | {value:.6g} |")
+        else:
+            lines.append(f"| `{name}` | {value} |")
+    return lines
+
+
+def run_benchmarks(out_dir: str | Path, only: list[str] | None = None, quick: bool = False) -> dict:
+    unknown = sorted(set(only or []) - set(SECTIONS))
+    if unknown:
+        raise ValueError(f"unknown benchmark section(s) {unknown}; known: {sorted(SECTIONS)}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    results: dict = {"machine": _machine(), "quick": quick}
+    for name, target in SECTIONS.items():
+        if only and name not in only:
+            continue
+        module_name, func_name = target.split(":")
+        print(f"bench: {name} ...", file=sys.stderr, flush=True)
+        started = time.perf_counter()
+        results[name] = getattr(importlib.import_module(module_name), func_name)(quick=quick)
+        results[name]["section_wall_s"] = round(time.perf_counter() - started, 2)
+    (out / "bench.json").write_text(json.dumps(results, indent=2) + "\n")
+    md = ["# cpg_walker benchmarks", "", "| figure | value |", "|---|---|", *_to_markdown(results), ""]
+    (out / "bench.md").write_text("\n".join(md))
+    print(f"bench: wrote {out / 'bench.json'} and {out / 'bench.md'}", file=sys.stderr)
+    return results

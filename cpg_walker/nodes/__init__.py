@@ -1,0 +1,1 @@
+"""Thin rclpy nodes: parameters, topics, timers, and a call into the pure core."""
