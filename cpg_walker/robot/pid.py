@@ -1,0 +1,128 @@
+"""Per-joint PID servo law of the HOAP-2, a pure class over arrays (no MuJoCo, no ROS).
+
+    tau = kp*(q* - q) + ki*I + kd*(qd* - qd),   I = integral of (q* - q) dt
+
+then clamped to +-max_torque. Anti-windup: the integral term is clamped to +-integral_limit (N*m), and the
+integral does not grow while the output is saturated in the direction of the error. Velocity limit: a
+joint already moving faster than max_velocity gets no torque that would speed it up further (the motor's
+no-load speed). Non-finite inputs are refused with a ValueError naming the joint.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from cpg_walker.robot.joints import JOINT_NAMES, MAX_TORQUE_NM, MAX_VELOCITY_RADS, group_of
+
+
+def load_pid_config(path: str | Path | None = None) -> dict:
+    """The PID configuration (``config/pid.yaml`` by default) as a dict."""
+    if path is None:
+        from cpg_walker.paths import config_path
+
+        path = config_path("pid.yaml")
+    with open(path, encoding="utf-8") as fh:
+        cfg = yaml.safe_load(fh)
+    if not isinstance(cfg, dict) or "groups" not in cfg:
+        raise ValueError(f"{path}: expected a mapping with 'groups' (leg/arm/body/head gains)")
+    return cfg
+
+
+class PidLaw:
+    """Independent PID servos for the joints ``names`` with per-joint gains (arrays of len(names))."""
+
+    def __init__(
+        self,
+        names: Sequence[str],
+        kp: Sequence[float] | np.ndarray,
+        ki: Sequence[float] | np.ndarray,
+        kd: Sequence[float] | np.ndarray,
+        max_torque: float | Sequence[float] = MAX_TORQUE_NM,
+        integral_limit: float = 0.5,
+        max_velocity: float | None = MAX_VELOCITY_RADS,
+    ):
+        self.names = tuple(names)
+        n = len(self.names)
+        self.kp, self.ki, self.kd = (self._vector(x) for x in (kp, ki, kd))
+        self.max_torque = np.broadcast_to(np.asarray(max_torque, dtype=float), (n,)).copy()
+        checks = ((self.kp, "kp"), (self.ki, "ki"), (self.kd, "kd"), (self.max_torque, "max_torque"))
+        for arr, label in checks:
+            if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+                raise ValueError(f"PID {label} must be finite and >= 0, got {arr}")
+        if not (math.isfinite(integral_limit) and integral_limit >= 0):
+            raise ValueError(f"PID integral_limit must be finite and >= 0, got {integral_limit}")
+        self.integral_limit = float(integral_limit)
+        self.max_velocity = None if max_velocity is None else float(max_velocity)
+        self.integral = np.zeros(n)
+
+    def _vector(self, x) -> np.ndarray:
+        return np.broadcast_to(np.asarray(x, dtype=float), (len(self.names),)).copy()
+
+    @classmethod
+    def from_config(
+        cls, names: Sequence[str] = JOINT_NAMES, config: Mapping | None = None, scale_kp: float = 1.0,
+        scale_kd: float = 1.0,
+    ) -> PidLaw:
+        """Gains by joint group, overridden per joint, from ``config/pid.yaml`` (or a given dict).
+        ``scale_kp``/``scale_kd`` multiply every gain (for margin sweeps)."""
+        cfg = dict(load_pid_config() if config is None else config)
+        groups, per_joint = cfg["groups"], cfg.get("joints") or {}
+        unknown = sorted(set(per_joint) - set(JOINT_NAMES))
+        if unknown:
+            raise ValueError(f"pid config: unknown joint(s) {unknown}")
+        gains = []
+        for name in names:
+            g = dict(groups[group_of(name)])
+            g.update(per_joint.get(name, {}))
+            gains.append((float(g["kp"]), float(g.get("ki", 0.0)), float(g["kd"])))
+        kp, ki, kd = (np.array(col) for col in zip(*gains, strict=True))
+        return cls(
+            names, kp * scale_kp, ki, kd * scale_kd,
+            max_torque=float(cfg.get("max_torque", MAX_TORQUE_NM)),
+            integral_limit=float(cfg.get("integral_limit", 0.5)),
+            max_velocity=cfg.get("max_velocity", MAX_VELOCITY_RADS),
+        )
+
+    def reset(self) -> None:
+        """Forget the integral (call when the robot is reset or the targets jump)."""
+        self.integral[:] = 0.0
+
+    def _check(self, label: str, x) -> np.ndarray:
+        arr = np.asarray(x, dtype=float)
+        if arr.shape != (len(self.names),):
+            raise ValueError(f"PID {label}: expected {len(self.names)} values, got shape {arr.shape}")
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            joints = [self.names[i] for i in np.flatnonzero(bad)]
+            raise ValueError(f"PID {label}: non-finite value for joint(s) {joints}")
+        return arr
+
+    def step(self, target_pos, target_vel, measured_pos, measured_vel, dt: float) -> np.ndarray:
+        """Torques (N*m) for one control period ``dt`` (s); updates the integral."""
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"PID dt must be a positive number, got {dt!r}")
+        qt = self._check("target_pos", target_pos)
+        vt = self._check("target_vel", target_vel)
+        q = self._check("measured_pos", measured_pos)
+        v = self._check("measured_vel", measured_vel)
+        err = qt - q
+        pd = self.kp * err + self.kd * (vt - v)
+        candidate = self.integral + err * dt
+        i_term = self.ki * candidate
+        saturated = np.abs(pd + i_term) > self.max_torque
+        pushing = np.sign(pd + i_term) == np.sign(err)
+        grow = ~(saturated & pushing)  # conditional integration
+        self.integral = np.where(grow, candidate, self.integral)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cap = np.where(self.ki > 0, self.integral_limit / self.ki, 0.0)
+        self.integral = np.clip(self.integral, -cap, cap)
+        tau = np.clip(pd + self.ki * self.integral, -self.max_torque, self.max_torque)
+        if self.max_velocity is not None:
+            over = (np.abs(v) > self.max_velocity) & (np.sign(tau) == np.sign(v))
+            tau = np.where(over, 0.0, tau)
+        return tau
