@@ -1,0 +1,451 @@
+"""The generic programmable CPG (paper eqs 4–11), vectorised over B independent CPGs of N oscillators.
+
+State: five (B, N) arrays x, y, ω, α, φ stacked as one (5, B, N) array, integrated with RK4
+(integrators.py). CPG b's output is Q_b = offset_b + gain_b·Σ_i α_{b,i} x_{b,i}.
+
+How we read the paper's equations (its typos, and the choices it leaves open) — all of them are in
+`learning_rhs` below, one comment per equation:
+
+* (4)  ẋ_i = γ(μ − r_i²)x_i − ω_i y_i + εF + τ·sin(R_i − φ_i), with R_i = (ω_i/ω_0)·θ_0.
+       The printed coupling term sin(θ_i − φ_i) does not involve oscillator 0, so it cannot be the
+       "Kuramoto coupling to oscillator 0" the text and Fig 1 ("the scaled phase input R_i from
+       oscillator 0") describe; we read θ_i there as R_i. With eq 9's convention sin θ = x/r, so
+       τ·sin(R_i − φ_i) is a unit-amplitude copy of the x-signal oscillator i should have, and averaged
+       over a cycle it adds τ/(2r)·sin(R_i − φ_i − θ_i) to θ̇_i: it locks θ_i to R_i − φ_i, the target
+       whose offset eq 8 learns. (Verified in test_cpg_network: φ converges to the true offsets and the
+       frozen network reproduces the teaching signal's phases.) Oscillator 0 has no such term.
+* (5)  as printed.
+* (6)  the left side is ω̇_i (printed υ̇_i) and y/r is y_i/r_i (printed g_i/r): eq 3 per oscillator.
+* (7)  α̇_i = η x_i F: the printed "n" is the learning constant η.
+* (8)  φ̇_i = sin(R_i − θ_i − φ_i): φ_i converges to R_i − θ_i (mod 2π), which is a constant only if
+       ω_i/ω_0 is an integer — oscillator 0 must hold the fundamental (true in Fig 2, where ω_0(0) is the
+       lowest initial frequency). With θ = ψ + π/2 (hopf.py), the learned offset for oscillator
+       phases ψ_i = ω_i t + c_i is φ_i = k_i c_0 − c_i + (k_i − 1)π/2, k_i = ω_i/ω_0.
+* (9)  θ_i = sgn(x_i)·arccos(−y_i/r_i) = atan2(x_i, −y_i) (see hopf.phase).
+* (10) F = P_teach − Q_learned; with a per-CPG offset/gain normalisation (teaching.py) F is computed in
+       normalised units: F = (P_teach − offset)/gain − Σ α_i x_i. offset = 0, gain = 1 is the paper.
+* (11) Q_learned = Σ_i α_i x_i, the sum over all oscillators i = 0..N−1.
+* (12) (humanoid, inter-CPG) ẋ_{0,k} = γ(μ − r²)x_{0,k} − ω_{0,k}y_{0,k} + τ·sin(θ_{0,k−1} − φ_{0,k}):
+       the printed equation omits γ; it is the same γ as eq 4 (the oscillator is the same Hopf
+       oscillator). The printed coupling sin(θ_{0,k} − φ_{0,k}) has the same typo as eq 4: the target
+       of oscillator (0,k) is θ_{0,k−1} − φ_{0,k}, which is what eq 13 makes φ_{0,k} converge to.
+* (13) the left side is φ̇_{0,k} (printed φ_{0,k}): φ̇_{0,k} = sin(θ_{0,k−1} − θ_{0,k} − φ_{0,k}).
+* (16)/(17) (feedback) + g_k·x_i/r_i and + g_k·y_i/r_i on all oscillators of CPG k: a push along the
+       radius that changes the amplitude and not the phase; the printed (μ − r²) again omits γ.
+
+Eqs 4/8 and 12/13 are one mechanism: every oscillator has at most one *reference* oscillator (any
+oscillator of any CPG) and a coupling strength; its target phase is Θ = ρ·θ_ref − φ with ρ = ω/ω_ref
+(eq 8, inside a CPG) or ρ = 1 (eq 13, between CPGs). By default oscillator i ≥ 1 of CPG b references
+oscillator 0 of CPG b with strength τ; `couple_cpgs` adds the eq 12–13 links between main oscillators
+(a chain, or two main oscillators referencing each other for the legs' antisymmetric coupling). φ of an
+oscillator without reference is unused, so φ_{b,0} is the eq 13 state "φ_{0,k}" of CPG b.
+
+Learning vs playback: while `learning` is True all five variables evolve (eqs 4–11). `freeze()` sets
+F = 0 and stops ω, α, φ (the paper's "set F(t) = 0"; φ is frozen too so a perturbation cannot be
+re-learned as a new phase offset); only x, y are integrated, with the cheaper `playback_rhs`.
+
+Modulation (frozen network only), as parameters of the dynamical system:
+* frequency: ω_eff = ζ_b·ω (per CPG). ζ < 0 inverts the rotation, i.e. plays the pattern backwards.
+  Ratios ω_i/ω_0 are unchanged, so phase relations hold; x, y are continuous, so the output is too.
+* amplitude: α relaxes exponentially to s_b·α_learned with time constant `amplitude_time_constant`
+  (physical seconds; 0 = instantaneous). The paper gives no mechanism for its smooth change of α; an
+  instantaneous change of α would make Q jump, so we let α move as a first-order state. It is updated
+  exactly (α* + (α − α*)·e^{−dt/T}) after each RK4 step; the oscillators are untouched.
+
+Time scale: every rate is multiplied by time_scale_b (per CPG), i.e. CPG b evolves in the internal time
+u = time_scale_b·t. Physical frequencies are time_scale·ω (`frequencies()`); this is how teaching.py
+maps any signal's band onto the band the paper's constants were tuned for.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cpg_walker.cpg.hopf import R_FLOOR, phase
+from cpg_walker.cpg.integrators import RK4
+
+#: RK4 accuracy/stability guard: time_scale·dt·max(|ω|, 2γμ) must not exceed this (see `check_step`).
+MAX_RATE_STEP = 0.5
+
+
+@dataclass(frozen=True)
+class CPGParams:
+    """Constants of eqs 4–11 (defaults: the paper's Fig 2) and of amplitude modulation."""
+
+    mu: float = 1.0
+    gamma: float = 8.0
+    epsilon: float = 0.9
+    eta: float = 0.5
+    tau: float = 2.0
+    amplitude_time_constant: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in ("mu", "gamma", "epsilon", "eta", "tau", "amplitude_time_constant"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"CPG parameter {name} must be a finite number >= 0, got {value!r}")
+        if self.mu <= 0:
+            raise ValueError(f"CPG parameter mu must be > 0 (it sets the amplitude), got {self.mu}")
+
+
+def _per_cpg(value: float | np.ndarray, B: int, name: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        arr = np.full(B, float(arr))
+    if arr.shape != (B,):
+        raise ValueError(f"{name} must be a scalar or have shape ({B},) (one value per CPG), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or infinite values")
+    return arr
+
+
+def _per_oscillator(value: float | np.ndarray, shape: tuple[int, int], name: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    try:
+        arr = np.broadcast_to(arr, shape).copy()
+    except ValueError:
+        raise ValueError(f"{name} has shape {arr.shape}, which does not fit the network's {shape}") from None
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or infinite values")
+    return arr
+
+
+class CPGNetwork:
+    """B independent generic CPGs of N adaptive Hopf oscillators each (optionally coupled, eqs 12–13).
+
+    Parameters
+    ----------
+    omega0: initial frequencies, shape (B, N) or (N,) (= one CPG), in internal units (rad per unit of
+        internal time; rad/s when time_scale = 1). Oscillator 0 of each CPG is the phase reference.
+    params: the constants μ, γ, ε, η, τ.
+    x0, y0, alpha0, phi0: initial state, broadcast to (B, N) (paper: 1, 0, 0, 0).
+    time_scale, offset, gain: per CPG, shape (B,) or scalar (see the module docstring).
+    """
+
+    def __init__(
+        self,
+        omega0: np.ndarray,
+        params: CPGParams | None = None,
+        *,
+        x0: float | np.ndarray = 1.0,
+        y0: float | np.ndarray = 0.0,
+        alpha0: float | np.ndarray = 0.0,
+        phi0: float | np.ndarray = 0.0,
+        time_scale: float | np.ndarray = 1.0,
+        offset: float | np.ndarray = 0.0,
+        gain: float | np.ndarray = 1.0,
+    ):
+        om = np.asarray(omega0, dtype=float)
+        if om.ndim == 1:
+            om = om[None, :]
+        if om.ndim != 2:
+            raise ValueError(f"omega0 must have shape (B, N) or (N,), got {np.shape(omega0)}")
+        B, N = om.shape
+        if N == 0:
+            raise ValueError("a CPG needs at least one oscillator (got zero oscillators)")
+        if B == 0:
+            raise ValueError("the network needs at least one CPG (got B = 0)")
+        if not np.all(np.isfinite(om)):
+            raise ValueError("omega0 contains NaN or infinite values")
+        self.params = params if params is not None else CPGParams()
+        self.B, self.N = B, N
+        shape = (B, N)
+        self._s = np.empty((5, B, N))
+        self._s[0] = _per_oscillator(x0, shape, "x0")
+        self._s[1] = _per_oscillator(y0, shape, "y0")
+        self._s[2] = om
+        self._s[3] = _per_oscillator(alpha0, shape, "alpha0")
+        self._s[4] = _per_oscillator(phi0, shape, "phi0")
+        self.time_scale = _per_cpg(time_scale, B, "time_scale")
+        if np.any(self.time_scale <= 0):
+            raise ValueError("time_scale must be > 0")
+        self.offset = _per_cpg(offset, B, "offset")
+        self.gain = _per_cpg(gain, B, "gain")
+        if np.any(self.gain == 0):
+            raise ValueError("gain must be non-zero")
+        # Coupling graph (see module docstring): reference oscillator as a flat index into B*N.
+        idx = np.arange(B * N).reshape(shape)
+        self._ref = np.where(np.arange(N)[None, :] == 0, idx, idx[:, :1])
+        self._ref_omega = self._ref.copy()  # whose ω divides ω_i in ρ: the reference (eq 8) or itself (eq 13)
+        self._k = np.where(np.arange(N)[None, :] == 0, 0.0, self.params.tau) * np.ones(shape)
+        self._learn_phi = (self._k > 0).astype(float)
+        self.learning = True
+        self.t = 0.0
+        self._rk_full = RK4((5, B, N))
+        self._rk_xy = RK4((2, B, N))
+        self._g: np.ndarray | None = None
+        self._checked_dt: float | None = None
+        self._scaled_h = not np.all(self.time_scale == 1.0)
+        self._gmu_l = self.params.gamma * self.params.mu
+        self._ts3 = self.time_scale[None, :, None]
+        # playback (frozen) parameters, set by freeze()
+        self._zeta = np.ones(B)
+        self._amp = np.ones(B)
+        self._alpha_learned = self._s[3].copy()
+        self._alpha_target = self._s[3].copy()
+        self._alpha_relaxing = False
+
+    # ---------------------------------------------------------------- state access
+    @property
+    def x(self) -> np.ndarray:
+        return self._s[0]
+
+    @property
+    def y(self) -> np.ndarray:
+        return self._s[1]
+
+    @property
+    def omega(self) -> np.ndarray:
+        """Learned ω (internal units), without the ζ modulation."""
+        return self._s[2]
+
+    @property
+    def alpha(self) -> np.ndarray:
+        """Current α (normalised units; during amplitude modulation, the relaxing value)."""
+        return self._s[3]
+
+    @property
+    def phi(self) -> np.ndarray:
+        return self._s[4]
+
+    @property
+    def state(self) -> np.ndarray:
+        """The (5, B, N) state array [x, y, ω, α, φ] (a view: writing to it changes the network)."""
+        return self._s
+
+    def frequencies(self) -> np.ndarray:
+        """Physical frequencies (rad/s) of the oscillators, (B, N): time_scale·ζ·ω."""
+        zeta = 1.0 if self.learning else self._zeta[:, None]
+        return self._s[2] * self.time_scale[:, None] * zeta
+
+    def amplitudes(self) -> np.ndarray:
+        """Physical amplitudes gain·α, (B, N) (α as currently applied)."""
+        return self._s[3] * self.gain[:, None]
+
+    def phases(self) -> np.ndarray:
+        """θ of every oscillator (eq 9), (B, N)."""
+        return phase(self._s[0], self._s[1])
+
+    def output(self) -> np.ndarray:
+        """Q_b = offset_b + gain_b·Σ_i α_{b,i} x_{b,i} (eq 11 in physical units), shape (B,)."""
+        return self.offset + self.gain * np.einsum("bi,bi->b", self._s[3], self._s[0])
+
+    # ---------------------------------------------------------------- coupling hooks (eqs 12–13)
+    def couple_cpgs(
+        self, child: int, parent: int, strength: float | None = None, phase_offset: float | None = None
+    ) -> None:
+        """Couple main oscillator (child, 0) to main oscillator (parent, 0) (eqs 12–13).
+
+        Adds τ'·sin(θ_{parent,0} − φ_{child,0}) to ẋ_{child,0} (τ' = `strength`, default τ) and, while
+        learning, φ̇_{child,0} = sin(θ_{parent,0} − θ_{child,0} − φ_{child,0}). `phase_offset` sets
+        φ_{child,0} (e.g. π for the legs' antisymmetric coupling). For two oscillators referencing each
+        other, call it both ways."""
+        for name, value in (("child", child), ("parent", parent)):
+            if not 0 <= value < self.B:
+                raise ValueError(f"{name} CPG index {value} out of range 0..{self.B - 1}")
+        if child == parent:
+            raise ValueError("a CPG cannot be coupled to itself")
+        k = self.params.tau if strength is None else float(strength)
+        if not np.isfinite(k) or k < 0:
+            raise ValueError(f"coupling strength must be finite and >= 0, got {strength}")
+        self._ref[child, 0] = parent * self.N
+        self._ref_omega[child, 0] = child * self.N  # ρ = 1
+        self._k[child, 0] = k
+        self._learn_phi[child, 0] = 1.0 if k > 0 else 0.0
+        if phase_offset is not None:
+            self._s[4, child, 0] = float(phase_offset)
+        if not self.learning:
+            self._prepare_playback()
+
+    # ---------------------------------------------------------------- right-hand sides
+    def learning_rhs(self, s: np.ndarray, Pn: np.ndarray, out: np.ndarray) -> None:
+        """d[x, y, ω, α, φ]/dt: eqs 4–11 (+16–17), written into `out` (5, B, N).
+
+        `Pn` is the *normalised* teaching input (P_teach − offset)/gain, shape (B,). Written for speed
+        (numpy's per-call overhead dominates at these sizes): in-place operations, x and y stacked."""
+        p = self.params
+        xy = s[:2]
+        x, y, om, al, ph = s
+        F = Pn - (al * x).sum(axis=1)  # (10), (11): F = P_teach − Σ_i α_i x_i  (sum over all i)
+        eF = (p.epsilon * F)[:, None]
+        r2 = x * x + y * y
+        radial = self._gmu_l - p.gamma * r2  # γ(μ − r_i²)
+        theta = np.arctan2(x, -y)  # (9): θ_i = sgn(x_i)·arccos(−y_i/r_i)
+        target = om / om.take(self._ref_omega)  # ρ = ω_i/ω_0 (8); 1 for eq-13 links
+        target *= theta.take(self._ref)
+        target -= ph  # Θ_i = R_i − φ_i, R_i = ρ·θ_ref
+        np.multiply(xy, radial, out=out[:2])
+        out[0] -= om * y
+        out[0] += eF
+        out[0] += self._k * np.sin(target)  # (4) [(12)]: ẋ_i = γ(μ−r_i²)x_i − ω_i y_i + εF + τ·sin(R_i − φ_i)
+        out[1] += om * x  # (5): ẏ_i = γ(μ − r_i²)y_i + ω_i x_i
+        np.divide(y, np.sqrt(r2), out=out[2])
+        out[2] *= -eF  # (6): ω̇_i = −εF·y_i/r_i
+        np.multiply(x, (p.eta * F)[:, None], out=out[3])  # (7): α̇_i = η x_i F
+        np.subtract(target, theta, out=out[4])
+        np.sin(out[4], out=out[4])
+        out[4] *= self._learn_phi  # (8): φ̇_i = sin(R_i − θ_i − φ_i)  [(13): R = θ_ref]
+        if self._g is not None:  # (16), (17): + g_k·(x_i, y_i)/r_i
+            out[:2] += xy * (self._g[:, None] / np.maximum(np.sqrt(r2), R_FLOOR))
+        if self._scaled_h:
+            out *= self._ts3
+
+    def playback_rhs(self, s: np.ndarray, _u: object, out: np.ndarray) -> None:
+        """d[x, y]/dt of the frozen network (F = 0; ω, α, φ constant): eqs 4, 5 (+16, 17) with ζ·ω.
+
+        Coefficients precomputed by `_prepare_playback` (time scale folded in)."""
+        x, y = s
+        r2 = x * x + y * y
+        radial = self._gmu - self._gamma * r2
+        theta_ref = np.arctan2(x, -y).take(self._ref)  # (9) of the reference oscillators
+        theta_ref *= self._rho
+        theta_ref -= self._phi_play
+        np.multiply(s, radial, out=out)
+        out[0] -= self._om_play * y
+        out[0] += self._k_play * np.sin(theta_ref)  # (4)/(12)
+        out[1] += self._om_play * x  # (5)
+        if self._g is not None:  # (16), (17)
+            out += s * ((self._g[:, None] * self._ts_play) / np.maximum(np.sqrt(r2), R_FLOOR))
+
+    # ---------------------------------------------------------------- learning / playback switches
+    def freeze(self) -> None:
+        """End learning: F = 0, ω, α, φ fixed; the learned signal stays as the limit cycle."""
+        self.learning = False
+        self._alpha_learned = self._s[3].copy()
+        self._alpha_target = self._alpha_learned * self._amp[:, None]
+        self._prepare_playback()
+
+    def unfreeze(self) -> None:
+        """Resume learning (modulation is reset: α back to its learned value, ζ = 1)."""
+        self.learning = True
+        self._s[3] = self._alpha_learned
+        self._zeta[:] = 1.0
+        self._amp[:] = 1.0
+        self._alpha_relaxing = False
+
+    def _prepare_playback(self) -> None:
+        p = self.params
+        self._gamma = p.gamma
+        self._gmu = p.gamma * p.mu
+        self._om_play = self._s[2] * self._zeta[:, None]
+        om = self._s[2]
+        self._rho = om / om.take(self._ref_omega)
+        self._phi_play = self._s[4].copy()
+        self._k_play = self._k.copy()
+        self._ts_play: float | np.ndarray = 1.0
+        if self._scaled_h:  # fold the time scale into the frozen coefficients (cheaper than scaling h)
+            ts = self.time_scale[:, None]
+            self._gamma = p.gamma * ts
+            self._gmu = p.gamma * p.mu * ts
+            self._om_play = self._om_play * ts
+            self._k_play = self._k_play * ts
+            self._ts_play = ts
+
+    # ---------------------------------------------------------------- modulation and perturbation
+    def set_frequency_scale(self, zeta: float | np.ndarray) -> None:
+        """ω_eff = ζ·ω for each CPG (scalar or (B,)); ζ < 0 plays the pattern backwards."""
+        self._require_frozen("frequency modulation")
+        self._zeta = _per_cpg(zeta, self.B, "frequency scale ζ").copy()
+        self._prepare_playback()
+
+    def set_amplitude_scale(self, scale: float | np.ndarray) -> None:
+        """α → scale·α_learned per CPG (scalar or (B,)), reached smoothly (module docstring)."""
+        self._require_frozen("amplitude modulation")
+        self._amp = _per_cpg(scale, self.B, "amplitude scale").copy()
+        self._alpha_target = self._alpha_learned * self._amp[:, None]
+        if self.params.amplitude_time_constant == 0:
+            self._s[3] = self._alpha_target
+            self._alpha_relaxing = False
+        else:
+            self._alpha_relaxing = True
+
+    def perturb(self, dx: float | np.ndarray = 0.0, dy: float | np.ndarray = 0.0) -> None:
+        """Add (dx, dy) to the oscillators' states (broadcast to (B, N))."""
+        shape = (self.B, self.N)
+        self._s[0] += _per_oscillator(dx, shape, "dx")
+        self._s[1] += _per_oscillator(dy, shape, "dy")
+
+    def _require_frozen(self, what: str) -> None:
+        if self.learning:
+            raise ValueError(f"{what} applies to a frozen (learned) network: call freeze() first")
+
+    # ---------------------------------------------------------------- stepping
+    def check_step(self, dt: float) -> None:
+        """Reject a non-positive, non-finite or too-large step (RK4 accuracy/stability guard)."""
+        if not isinstance(dt, (int, float, np.floating)) or not np.isfinite(dt) or dt <= 0:
+            raise ValueError(f"integration step must be a finite number > 0, got {dt!r}")
+        zeta = 1.0 if self.learning else np.abs(self._zeta)[:, None]
+        radial = 2 * self.params.gamma * self.params.mu
+        fastest = float(np.max(self.time_scale[:, None] * np.maximum(np.abs(self._s[2]) * zeta, radial)))
+        if dt * fastest > MAX_RATE_STEP:
+            raise ValueError(
+                f"integration step dt={dt:g} s is too large for the fastest rate of this network "
+                f"({fastest:.3g} 1/s): need dt <= {MAX_RATE_STEP / fastest:.3g} s"
+            )
+        self._checked_dt = dt
+
+    def step(
+        self,
+        dt: float,
+        teach: float | np.ndarray | None = None,
+        feedback: float | np.ndarray | None = None,
+    ) -> None:
+        """Advance by dt (physical seconds) with RK4.
+
+        Learning: `teach` is P_teach, either held over the step (scalar or (B,)) or sampled at the three
+        RK4 times t, t + dt/2, t + dt (shape (3, B)). Frozen: no teaching input. `feedback` is g_k of
+        eqs 16–17, scalar or (B,), held over the step (None = no feedback term)."""
+        if dt != self._checked_dt:
+            self.check_step(dt)
+        if feedback is None:
+            self._g = None
+        else:
+            g = np.asarray(feedback, dtype=float)
+            if g.shape != (self.B,):
+                g = _per_cpg(g, self.B, "feedback g")
+            elif not np.isfinite(g.sum()):
+                raise ValueError("feedback g contains NaN or infinite values")
+            self._g = g
+        if self.learning:
+            if teach is None:
+                raise ValueError("a learning network needs a teaching input (or call freeze())")
+            Pn = self.normalise_teaching(teach)
+            if Pn.ndim == 1:
+                self._rk_full.step(self.learning_rhs, self._s, dt, Pn, Pn, Pn)
+            else:
+                self._rk_full.step(self.learning_rhs, self._s, dt, Pn[0], Pn[1], Pn[2])
+        else:
+            if teach is not None:
+                raise ValueError("the network is frozen: it takes no teaching input (unfreeze() to learn)")
+            self._rk_xy.step(self.playback_rhs, self._s[:2], dt, None, None, None)
+            if self._alpha_relaxing:
+                self._relax_alpha(dt)
+        self.t += dt
+
+    def normalise_teaching(self, P: float | np.ndarray) -> np.ndarray:
+        """(P − offset)/gain, validated: P is a scalar, (B,) or (k, B); returns (B,) or (k, B)."""
+        arr = np.asarray(P, dtype=float)
+        if arr.ndim == 0:
+            arr = np.full(self.B, float(arr))
+        if arr.shape[-1:] != (self.B,) or arr.ndim > 2:
+            raise ValueError(
+                f"teaching signal has shape {arr.shape}; expected a scalar, ({self.B},) or (k, {self.B})"
+            )
+        if not np.isfinite(arr.sum()):
+            raise ValueError("teaching signal contains NaN or infinite values")
+        out = arr - self.offset
+        out /= self.gain
+        return out
+
+    def _relax_alpha(self, dt: float) -> None:
+        T = self.params.amplitude_time_constant
+        decay = np.exp(-dt / T)
+        al = self._s[3]
+        al -= self._alpha_target
+        al *= decay
+        al += self._alpha_target
+        if np.max(np.abs(al - self._alpha_target)) <= 1e-12 * (1.0 + np.max(np.abs(self._alpha_target))):
+            al[...] = self._alpha_target
+            self._alpha_relaxing = False
