@@ -32,7 +32,6 @@ setup(
     maintainer_email="cpg-walker@example.org",
     description="Programmable CPGs learned from the HOAP-2 walk, driving a MuJoCo HOAP-2 through ROS 2.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [f"{name}={target}" for name, target in {**NODES, **TOOLS}.items()],
     },
