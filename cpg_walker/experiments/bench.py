@@ -17,6 +17,7 @@ from pathlib import Path
 # name -> "module:function". Each later issue adds its own section here.
 SECTIONS: dict[str, str] = {
     "cpg": "cpg_walker.experiments.bench_cpg:run",
+    "robot": "cpg_walker.experiments.bench_robot:run",
 }
 
 
