@@ -18,6 +18,7 @@ class Progress:
         self._start = time.perf_counter()
         self._last = 0.0
         self._tty = getattr(self.stream, "isatty", lambda: False)()
+        self._final = False
 
     def update(self, done: float, extra: str = "") -> None:
         if not self.enabled:
@@ -26,6 +27,7 @@ class Progress:
         if now - self._last < (0.1 if self._tty else 2.0) and done < self.total:
             return
         self._last = now
+        self._final = done >= self.total
         frac = 0.0 if self.total <= 0 else min(1.0, done / self.total)
         bar = "#" * int(frac * 30)
         elapsed = now - self._start
@@ -39,8 +41,9 @@ class Progress:
     def close(self, extra: str = "") -> None:
         if not self.enabled:
             return
-        self._last = 0.0
-        self.update(self.total, extra)
+        if not self._final or extra:
+            self._last = 0.0
+            self.update(self.total, extra)
         if self._tty:
             self.stream.write("\n")
             self.stream.flush()

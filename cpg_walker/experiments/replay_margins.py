@@ -1,7 +1,8 @@
 """Margins of the in-process replay: one parameter at a time around the nominal configuration (leg/body
 kp and kd, floor friction, control delay, armature), both recorded gaits, 30 s each; writes JSON + PNG.
 
-A point "walks" when the robot has not fallen after the full duration and moved forward.
+A point "walks" when the robot has not fallen after the full duration and moved forward at a mean speed of
+at least MIN_SPEED_MPS (0.5 m in 30 s; a third of the slow walk's speed).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ SWEEPS: dict[str, list[float]] = {
     "armature": [0.0, 0.003, 0.005, 0.01, 0.02, 0.04],
 }
 QUICK: dict[str, list[float]] = {"kp": [60, 100, 200], "delay_s": [0.0, 0.004]}
+MIN_SPEED_MPS = 0.5 / 30.0
 
 
 def run_point(
@@ -46,7 +48,7 @@ def run_point(
     result = run_replay(sim, source, pid, duration, rate_hz=float(pid_cfg.get("rate_hz", 500)), delay_s=delay)
     m = result.metrics
     keys = ("fell", "fall_time_s", "distance_m", "lateral_drift_m", "heading_change_deg")
-    walks = (not m["fell"]) and m["distance_m"] > 0.5
+    walks = (not m["fell"]) and m["distance_m"] > MIN_SPEED_MPS * duration
     return {"gait": gait, "param": param, "value": value, "walks": walks, **{k: m[k] for k in keys}}
 
 
