@@ -1,0 +1,25 @@
+"""`cpg-walker fit --csv FILE [--column NAME] [--oscillators N] --out DIR`: learn a recorded signal."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("fit", help="learn a periodic signal from a CSV into a CPG; write fit.json and a PNG")
+    p.add_argument("--csv", required=True, help="CSV with a header: time (s) first, then signal columns")
+    p.add_argument("--column", default=None, help="signal column to learn (default: every column)")
+    p.add_argument("--oscillators", type=int, default=None,
+                   help="oscillators per CPG (default: number of significant spectral components)")
+    p.add_argument("--out", required=True, help="output directory")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from cpg_walker.experiments.fit import run_fit
+
+    if args.oscillators is not None and args.oscillators < 1:
+        raise ValueError(f"--oscillators must be >= 1, got {args.oscillators}")
+    return run_fit(Path(args.csv), args.column, args.oscillators, Path(args.out))
