@@ -11,7 +11,6 @@ import importlib
 import sys
 
 
-
 def command_modules() -> list[str]:
     """Every module of this package that defines `register` is a sub-command (listed alphabetically)."""
     import pkgutil
