@@ -9,7 +9,9 @@ PACKAGE = "cpg_walker"
 # Every node and tool installed as a console script: `ros2 run cpg_walker <name>` finds them in
 # lib/cpg_walker (see setup.cfg); a pip install puts them on the venv's bin/.
 NODES: dict[str, str] = {
-    # filled in as the nodes land: "sim_node": "cpg_walker.nodes.sim_node:main", ...
+    "sim_node": "cpg_walker.nodes.sim_node:main",
+    "pid_node": "cpg_walker.nodes.pid_node:main",
+    "target_player_node": "cpg_walker.nodes.target_player_node:main",
 }
 TOOLS = {
     "cpg-walker": "cpg_walker.cli.main:main",

@@ -1,0 +1,154 @@
+"""Start the ROS graph from Python (no ``ros2 launch`` needed): each node as a subprocess in its own
+process group, on an isolated DDS domain, with parameters; stopped with SIGINT, then SIGKILL.
+
+    with Graph(log_dir) as g:
+        g.start("sim_node", pacing="lockstep", duration=5.0)
+        g.start("pid_node", lockstep=True)
+        g.wait("sim_node", timeout=60)
+
+Used by ``cpg-walker replay --graph``, the benchmark and the multi-process tests.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+NODES = ("sim_node", "pid_node", "target_player_node")
+
+
+def random_domain_id() -> int:
+    """A DDS domain in 1..101 (higher ids can collide with the ephemeral port range)."""
+    return random.SystemRandom().randint(1, 101)
+
+
+def isolated_env(domain_id: int, base: dict | None = None) -> dict:
+    """The environment of an isolated graph: its own domain, discovery on this host only."""
+    env = dict(os.environ if base is None else base)
+    env["ROS_DOMAIN_ID"] = str(domain_id)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.pop("ROS_LOCALHOST_ONLY", None)  # deprecated; conflicts with the range above
+    env["PYTHONUNBUFFERED"] = "1"
+    env["RCUTILS_LOGGING_BUFFERED_STREAM"] = "0"
+    return env
+
+
+def param_arg(name: str, value: object) -> str:
+    """``name:=value`` in the YAML form rclpy parses with the declared type (floats keep a '.')."""
+    def fmt(v: object) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, float):
+            return repr(v)
+        if isinstance(v, int):
+            return str(v)
+        if isinstance(v, list | tuple):
+            return "[" + ",".join(fmt(x) for x in v) + "]"
+        s = str(v)
+        return s if s else "''"
+    return f"{name}:={fmt(value)}"
+
+
+@dataclass
+class NodeProcess:
+    name: str
+    popen: subprocess.Popen
+    log_path: Path
+    started: float
+
+    @property
+    def pid(self) -> int:
+        return self.popen.pid
+
+    def cpu_seconds(self) -> float:
+        """User + system CPU time the process has used so far (from /proc)."""
+        try:
+            fields = Path(f"/proc/{self.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            return float("nan")
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
+
+
+class Graph:
+    """A set of node processes on one isolated domain; a context manager that always stops them."""
+
+    def __init__(self, log_dir: str | Path, domain_id: int | None = None, use_sim_time: bool = True):
+        self.log_dir = Path(log_dir)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.domain_id = random_domain_id() if domain_id is None else int(domain_id)
+        self.env = isolated_env(self.domain_id)
+        self.use_sim_time = use_sim_time
+        self.procs: dict[str, NodeProcess] = {}
+
+    def command(self, node: str, params: dict) -> list[str]:
+        if node not in NODES:
+            raise ValueError(f"unknown node {node!r}; known: {NODES}")
+        args = [sys.executable, "-m", f"cpg_walker.nodes.{node}", "--ros-args"]
+        for name, value in {"use_sim_time": self.use_sim_time, **params}.items():
+            args += ["-p", param_arg(name.replace("__", "."), value)]
+        return args
+
+    def start(self, node: str, **params: object) -> NodeProcess:
+        """Start ``node`` with ROS parameters (``push__force=[..]`` for ``push.force``)."""
+        log_path = self.log_dir / f"{node}.log"
+        with open(log_path, "wb") as log:
+            popen = subprocess.Popen(self.command(node, params), env=self.env, stdout=log,
+                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                     start_new_session=True)
+        proc = NodeProcess(node, popen, log_path, time.monotonic())
+        self.procs[node] = proc
+        return proc
+
+    def wait(self, node: str, timeout: float) -> int:
+        """Wait for ``node`` to exit by itself; raise TimeoutError (with its log tail) if it does not."""
+        proc = self.procs[node]
+        try:
+            return proc.popen.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise TimeoutError(f"{node} still running after {timeout} s; log tail:\n"
+                               f"{proc.log()[-2000:]}") from None
+
+    def stop(self, node: str, timeout: float = 5.0, interrupt: bool = True) -> int | None:
+        """SIGINT the node's process group, then SIGKILL after ``timeout``; return its exit status."""
+        proc = self.procs[node]
+        p = proc.popen
+        if p.poll() is None:
+            if interrupt:
+                _signal_group(p.pid, signal.SIGINT)
+            try:
+                p.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                _signal_group(p.pid, signal.SIGKILL)
+                p.wait(timeout=timeout)
+        else:
+            _signal_group(p.pid, signal.SIGKILL)  # stray children of an exited leader, if any
+        return p.returncode
+
+    def stop_all(self, timeout: float = 5.0) -> dict[str, int | None]:
+        """Stop every node (all get SIGINT first, then each is waited for)."""
+        for proc in self.procs.values():
+            if proc.popen.poll() is None:
+                _signal_group(proc.pid, signal.SIGINT)
+        return {name: self.stop(name, timeout, interrupt=False) for name in list(self.procs)}
+
+    def __enter__(self) -> Graph:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop_all()
+
+
+def _signal_group(pid: int, sig: int) -> None:
+    try:
+        os.killpg(pid, sig)
+    except (ProcessLookupError, PermissionError):
+        pass

@@ -1,0 +1,64 @@
+"""target_player_node: streams a recorded gait as ``/joint_targets`` (``ros2 run cpg_walker
+target_player_node``), one message per ``/clock`` tick, stamped with that tick, so it stays in step with
+the simulation in every pacing mode (event-driven on /clock, no wall timer). The recording plays from sim
+time ``start_time``, then its steady cycle repeats (cpg_walker.robot.gait_data.GaitPlayback).
+"""
+
+from __future__ import annotations
+
+from cpg_walker.nodes.runtime import float_param, parse_cli, plain_param, run_main
+
+INTERFACE = """\
+subscribes: /clock (rosgraph_msgs/Clock)
+publishes: /joint_targets (sensor_msgs/JointState: position + velocity of all 25 joints, stamp = tick)
+parameters: gait (walk|slow), data (CSV path, overrides gait), start_time (sim s)"""
+
+
+def _make_node():
+    from rclpy.node import Node
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+
+    from cpg_walker.nodes.messages import JointStateBuilder
+    from cpg_walker.nodes.runtime import HotPath
+    from cpg_walker.nodes.validation import to_ns
+    from cpg_walker.robot.gait_data import Cycle, GaitPlayback, find_steady_cycle, load_gait
+
+    class TargetPlayerNode(Node):
+        def __init__(self) -> None:
+            super().__init__("target_player")
+            p = self.declare_parameter
+            p("gait", "walk", plain_param("packaged recording: walk or slow", read_only=True))
+            p("data", "", plain_param("a CSV in the packaged layout (overrides gait)", read_only=True))
+            p("start_time", 0.0, float_param("sim s at which the recording starts", 0.0, 1e6,
+                                             read_only=True))
+            g = self.get_parameter
+            gait = load_gait(g("data").value or g("gait").value)
+            try:
+                cycle = find_steady_cycle(gait)
+            except ValueError:
+                cycle = Cycle(start=0.0, period=gait.duration + 1.0, mismatch_rad=float("nan"))
+            self.playback = GaitPlayback(gait, cycle=cycle)
+            self.start_ns = round(g("start_time").value * 1e9)
+            self.builder = JointStateBuilder(self.playback.names)
+            self.pub = self.create_publisher(JointState, "/joint_targets", 10)
+            self.hot = HotPath(self, [self.create_subscription(Clock, "/clock", self._on_clock, 100)])
+            self.get_logger().info(f"playing {gait.name} ({gait.duration:.2f} s, then its "
+                                   f"{cycle.period:.3f} s cycle) from sim time {self.start_ns / 1e9} s")
+
+        def _on_clock(self, msg: Clock) -> None:
+            t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
+            q, qd = self.playback.targets(max(0, t_ns - self.start_ns) / 1e9)
+            self.pub.publish(self.builder.fill(t_ns, position=q, velocity=qd))
+
+    return TargetPlayerNode()
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = parse_cli("target_player_node", "Streams a recorded HOAP-2 gait as /joint_targets on /clock.",
+                     INTERFACE, argv)
+    return run_main(argv, _make_node)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
