@@ -16,6 +16,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="sim seconds (default: the recording, then its steady cycle repeated, to 30 s)")
     p.add_argument("--no-render", action="store_true", help="skip the filmstrip and GIF")
+    p.add_argument("--graph", action="store_true",
+                   help="run through the ROS graph instead (sim_node + pid_node + target_player_node "
+                        "processes; no filmstrip); replay.json adds real_time_factor")
+    p.add_argument("--pacing", choices=("lockstep", "realtime", "fast"), default="lockstep",
+                   help="with --graph: the sim node's pacing (default lockstep)")
     p.set_defaults(func=_run)
 
 
@@ -23,6 +28,15 @@ def _run(args: argparse.Namespace) -> int:
     import json
     import os
 
+    if args.graph:
+        from cpg_walker.experiments.replay_graph import run_graph_replay
+
+        report = run_graph_replay(args.out, gait=args.gait, data=args.data, duration=args.duration,
+                                  pacing=args.pacing)
+        keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps",
+                "lateral_drift_m", "heading_change_deg", "real_time_factor")
+        print(json.dumps({k: report[k] for k in keys}))
+        return 0
     if not args.no_render:
         os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede the mujoco import
 
