@@ -31,7 +31,7 @@ def _make_node():
     from sensor_msgs.msg import JointState
 
     from cpg_walker.nodes.messages import JointStateBuilder, read_joint_command, stamp_ns
-    from cpg_walker.nodes.runtime import HotPath
+    from cpg_walker.nodes.runtime import ActivityStats, HotPath, exit_log
     from cpg_walker.nodes.validation import check_finite_scalar
     from cpg_walker.robot.hoap2 import default_standing_posture
     from cpg_walker.robot.joints import JOINT_NAMES, MAX_TORQUE_NM
@@ -97,6 +97,7 @@ def _make_node():
             self.pub = self.create_publisher(JointState, "/joint_torques", 10)
             subs = [self.create_subscription(JointState, "/joint_targets", self._on_target, 10),
                     self.create_subscription(JointState, "/joint_states", self._on_state, 10)]
+            self.activity = ActivityStats()
             self.hot = HotPath(self, subs)
             self.idle = self._check_wait
             self._ok = rclpy.ok
@@ -187,6 +188,7 @@ def _make_node():
                                        throttle_duration_sec=2.0)
 
         def _on_state(self, msg: JointState) -> None:
+            self.activity.tick()
             if msg.name == self.names and len(msg.position) == len(msg.velocity) == len(self.names):
                 q, v = np.asarray(msg.position), np.asarray(msg.velocity)
                 if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
@@ -246,6 +248,11 @@ def _make_node():
             self.last_state_ns = t_ns
             self.answered_ns = t_ns
             self.pub.publish(self.b_tau.fill(t_ns, effort=tau))
+
+        def on_exit(self) -> None:
+            import json
+
+            exit_log(self, "stats " + json.dumps(self.activity.summary()))
 
     return PidNode()
 

@@ -23,6 +23,39 @@ def parse_cli(prog: str, description: str, interface: str, argv: list[str] | Non
     return argv
 
 
+def exit_log(node, text: str) -> None:
+    """Log at exit: through the node's logger while its context is up, else on stderr (after SIGINT
+    rclpy has already shut the context down, and /rosout can no longer be published)."""
+    if node.context.ok():
+        node.get_logger().info(text)
+    else:
+        print(f"[INFO] [{node.get_name()}]: {text}", file=sys.stderr, flush=True)
+
+
+class ActivityStats:
+    """CPU and wall time of a node from its first handled message to exit (excludes start-up imports)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.cpu0 = self.wall0 = 0.0
+
+    def tick(self) -> None:
+        import time
+
+        if self.count == 0:
+            self.cpu0, self.wall0 = time.process_time(), time.monotonic()
+        self.count += 1
+
+    def summary(self) -> dict:
+        import time
+
+        if self.count == 0:
+            return {"messages": 0}
+        cpu, wall = time.process_time() - self.cpu0, time.monotonic() - self.wall0
+        return {"messages": self.count, "active_wall_s": round(wall, 3), "active_cpu_s": round(cpu, 3),
+                "cpu_fraction": round(cpu / wall, 3) if wall > 0 else None}
+
+
 class HotPath:
     """Take messages of a few subscriptions straight from rcl, bypassing the executor.
 

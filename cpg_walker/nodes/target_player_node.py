@@ -10,8 +10,10 @@ from cpg_walker.nodes.runtime import float_param, parse_cli, plain_param, run_ma
 
 INTERFACE = """\
 subscribes: /clock (rosgraph_msgs/Clock)
-publishes: /joint_targets (sensor_msgs/JointState: position + velocity of all 25 joints, stamp = tick)
-parameters: gait (walk|slow), data (CSV path, overrides gait), start_time (sim s)"""
+publishes: /joint_targets (sensor_msgs/JointState: position + velocity of all 25 joints, stamped with
+  the tick, and with lookahead also the next tick)
+parameters: gait (walk|slow), data (CSV path, overrides gait), start_time (sim s), lookahead (also send
+  the next period's target, period taken from the last two ticks)"""
 
 
 def _make_node():
@@ -20,7 +22,7 @@ def _make_node():
     from sensor_msgs.msg import JointState
 
     from cpg_walker.nodes.messages import JointStateBuilder
-    from cpg_walker.nodes.runtime import HotPath
+    from cpg_walker.nodes.runtime import ActivityStats, HotPath, exit_log
     from cpg_walker.nodes.validation import to_ns
     from cpg_walker.robot.gait_data import Cycle, GaitPlayback, find_steady_cycle, load_gait
 
@@ -32,6 +34,8 @@ def _make_node():
             p("data", "", plain_param("a CSV in the packaged layout (overrides gait)", read_only=True))
             p("start_time", 0.0, float_param("sim s at which the recording starts", 0.0, 1e6,
                                              read_only=True))
+            p("lookahead", True, plain_param("also send the next period's target on each tick (period "
+                                             "from the last two ticks)", read_only=True))
             g = self.get_parameter
             gait = load_gait(g("data").value or g("gait").value)
             try:
@@ -40,16 +44,36 @@ def _make_node():
                 cycle = Cycle(start=0.0, period=gait.duration + 1.0, mismatch_rad=float("nan"))
             self.playback = GaitPlayback(gait, cycle=cycle)
             self.start_ns = round(g("start_time").value * 1e9)
+            self.lookahead = bool(g("lookahead").value)
+            self.last_tick_ns: int | None = None
+            self.sent_ns: int | None = None
             self.builder = JointStateBuilder(self.playback.names)
             self.pub = self.create_publisher(JointState, "/joint_targets", 10)
+            self.activity = ActivityStats()
             self.hot = HotPath(self, [self.create_subscription(Clock, "/clock", self._on_clock, 100)])
             self.get_logger().info(f"playing {gait.name} ({gait.duration:.2f} s, then its "
                                    f"{cycle.period:.3f} s cycle) from sim time {self.start_ns / 1e9} s")
 
         def _on_clock(self, msg: Clock) -> None:
+            self.activity.tick()
             t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
+            if t_ns != self.sent_ns:  # not sent ahead (first tick, a gap) or a re-sent tick: send it
+                self._publish(t_ns)
+            if self.lookahead and self.last_tick_ns is not None and t_ns > self.last_tick_ns:
+                # the target is a function of its stamp alone, so sending the next period's now is
+                # deterministic and takes this node off the controller's critical path
+                self._publish(t_ns + (t_ns - self.last_tick_ns))
+            self.last_tick_ns = t_ns
+
+        def _publish(self, t_ns: int) -> None:
             q, qd = self.playback.targets(max(0, t_ns - self.start_ns) / 1e9)
             self.pub.publish(self.builder.fill(t_ns, position=q, velocity=qd))
+            self.sent_ns = t_ns
+
+        def on_exit(self) -> None:
+            import json
+
+            exit_log(self, "stats " + json.dumps(self.activity.summary()))
 
     return TargetPlayerNode()
 

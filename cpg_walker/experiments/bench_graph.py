@@ -1,0 +1,150 @@
+"""Benchmark section ``graph``: the ROS graph's speed (registered in experiments/bench.py SECTIONS).
+
+Measures, each in its own isolated DDS domain with real node processes:
+  * real-time factor of sim_node + pid_node (standing, 500 Hz control, 1 kHz physics) in each pacing;
+  * the walk through the three-process graph (with target_player_node) in lockstep;
+  * the stretch goal: lockstep at a 1 ms control period (1 kHz);
+  * latency from publishing a /joint_states sample to the sim taking the torque that answers it (p50/p99,
+    measured inside the sim process on one monotonic clock);
+  * CPU per node over its active period (fraction of one core).
+Baselines measured in the same run: the same sim + PID law in one process without ROS (real-time factor),
+and the per-period costs inside the sim process (state publishing, physics step, an idle rclpy
+executor ``spin_once`` versus the direct wait-set poll the nodes use).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _node_stats(log: str) -> dict:
+    m = re.findall(r"stats (\{.*\})", log)
+    return json.loads(m[-1]) if m else {}
+
+
+def graph_run(pacing: str, duration: float, player: bool = False, control_period: float = 0.002,
+              work: Path | None = None) -> dict:
+    """One run of the graph; the sim exits after ``duration`` sim seconds."""
+    from cpg_walker.graph import Graph
+    from cpg_walker.nodes.sim_core import RunRecord
+
+    work = Path(tempfile.mkdtemp(prefix="bench_graph_")) if work is None else work
+    tag = f"{pacing}_{'walk' if player else 'stand'}_{round(control_period * 1e6)}us"
+    record_path = work / f"{tag}.json"
+    with Graph(work / tag) as g:
+        g.start("pid_node", lockstep=pacing == "lockstep", wait_for_targets=player)
+        if player:
+            g.start("target_player_node")
+        g.start("sim_node", pacing=pacing, duration=float(duration), control_period=float(control_period),
+                record_path=str(record_path))
+        g.wait("sim_node", timeout=60 + 20 * duration)
+        g.stop_all()
+        logs = {name: p.log() for name, p in g.procs.items()}
+    rec = RunRecord.load(record_path)
+    s = rec.stats
+    cpu = {"sim_node": round(s["cpu_s"] / s["wall_s"], 3) if s["wall_s"] else None}
+    for name in ("pid_node", "target_player_node"):
+        if name in logs:
+            cpu[name] = _node_stats(logs[name]).get("cpu_fraction")
+    return {
+        "real_time_factor": s["real_time_factor"], "sim_s": s["sim_s"], "wall_s": s["wall_s"],
+        "control_hz": round(1.0 / control_period), "latency_ms": s["latency"],
+        "late_commands": s["late_commands"], "torque_age_mean_ms": round(s["torque_age_s"]["mean"] * 1e3, 3),
+        "cpu_core_fraction": cpu, "fell": rec.fell,
+        "distance_m": round(float(rec.base_xy[-1][0] - rec.base_xy[0][0]), 4) if rec.base_xy else None,
+    }
+
+
+def inprocess_baseline(duration: float) -> dict:
+    """The same physics + PID law at 500 Hz in one process, no ROS: the ceiling of the graph."""
+    from cpg_walker.robot.hoap2 import Hoap2Sim, default_standing_posture
+    from cpg_walker.robot.pid import PidLaw
+
+    sim, pid = Hoap2Sim(), PidLaw.from_config()
+    target, zero = default_standing_posture(), np.zeros(25)
+    n = round(duration / 0.002)
+    t0 = time.perf_counter()
+    for _ in range(n):
+        tau = pid.step(target, zero, sim.joint_positions(), sim.joint_velocities(), 0.002)
+        sim.step(tau, 2)
+    wall = time.perf_counter() - t0
+    return {"real_time_factor": round(duration / wall, 2), "per_period_us": round(wall / n * 1e6, 1)}
+
+
+def per_period_costs(n: int = 1000) -> dict:
+    """Median microseconds of the sim node's per-period work, in this process (isolated domain)."""
+    import os
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from cpg_walker.graph import random_domain_id
+    from cpg_walker.nodes import sim_node
+
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    rclpy.init(domain_id=random_domain_id(), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = sim_node._make_node()
+
+    def timed(fn) -> float:
+        samples = []
+        for _ in range(n):
+            t = time.perf_counter()
+            fn()
+            samples.append(time.perf_counter() - t)
+        return round(float(np.median(samples)) * 1e6, 1)
+
+    ex = SingleThreadedExecutor()
+    other = rclpy.create_node("bench_idle")
+    ex.add_node(other)
+    k = [0]
+
+    def publish():
+        node.publish_state(k[0] * 2_000_000)
+        k[0] += 1
+
+    out = {
+        "publish_state_us": timed(publish),
+        "physics_period_us": timed(lambda: node.sim.step(node.tau, node.steps_per_period)),
+        "executor_spin_once_idle_us": timed(lambda: ex.spin_once(timeout_sec=0.0)),
+        "hotpath_poll_idle_us": timed(lambda: node.hot.poll(0.0)),
+    }
+    ex.shutdown()
+    other.destroy_node()
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return out
+
+
+def run(quick: bool = False) -> dict:
+    d = 3.0 if quick else 10.0
+    work = Path(tempfile.mkdtemp(prefix="bench_graph_"))
+    result: dict = {
+        "setup": {"physics_dt_s": 0.001, "control_period_s": 0.002, "sim_s_per_run": d,
+                  "note": "sim_node + pid_node standing unless stated; each run in its own DDS domain"},
+        "baseline_inprocess": inprocess_baseline(d),
+        "per_period_costs": per_period_costs(300 if quick else 1000),
+    }
+    for pacing in ("realtime", "fast", "lockstep"):
+        result[pacing] = graph_run(pacing, d, work=work)
+    result["lockstep_walk_3_nodes"] = graph_run("lockstep", d, player=True, work=work)
+    result["realtime_walk_3_nodes"] = graph_run("realtime", d, player=True, work=work)
+    result["lockstep_1khz"] = graph_run("lockstep", d, control_period=0.001, work=work)
+    result["summary"] = {
+        "real_time_factor": {k: result[k]["real_time_factor"] for k in
+                             ("realtime", "fast", "lockstep", "lockstep_walk_3_nodes", "lockstep_1khz")},
+        "latency_p50_ms": result["lockstep"]["latency_ms"].get("p50_ms"),
+        "latency_p99_ms": result["lockstep"]["latency_ms"].get("p99_ms"),
+    }
+    return result
+
+
+if __name__ == "__main__":
+    import sys
+
+    print(json.dumps(run(quick="--quick" in sys.argv), indent=2))
