@@ -1,0 +1,681 @@
+"""The humanoid CPG controller (paper Section III-A): 10 generic CPGs, one per controlled DOF, coupled.
+
+Pure numpy (no rclpy, no MuJoCo): learning, playback, modulation, a run_replay target source and YAML I/O.
+
+Architecture (Fig 5), over ``robot.joints.CONTROLLED_JOINTS`` (Hip1, Hip2, Knee, Ankle1, Ankle2 of the
+left, then the right leg), B = 10 CPGs of N oscillators each (the paper: N = 3):
+
+* Inside each CPG: eqs 4–11 (CPGNetwork), oscillator i >= 1 phase-locked to the CPG's main oscillator 0
+  through the learned φ_i of eq 8.
+* Between CPGs (eqs 12–13): the main oscillator of a child DOF gets τ·sin(θ_parent − φ_child) and, while
+  learning, φ̇_child = sin(θ_parent − θ_child − φ_child) — 4 links per leg, 8 learned inter-DOF phases.
+  Each leg is a tree rooted at Hip2, the DOF that carries the inter-leg coupling (Fig 5's "first DOF"):
+  sagittal chain Hip2 → Knee → Ankle1, lateral chain Hip2 → Hip1 → Ankle2. The lateral pair hangs from
+  Hip1 rather than from Ankle1 because Hip1 and Ankle2 are the two roll joints that together keep the
+  foot parallel to the ground (the paper's eqs 14–15 treat them as one pair), so their relative phase is
+  the one that must be held tightly; a single chain Hip2 → … → Ankle2 through the pitch joints would
+  accumulate the phase errors of three links between them.
+* Between the legs: the two Hip2 main oscillators reference each other with φ = π (antisymmetric
+  coupling). π is a design constant, not one of the 8 learned phases (the recording's Hip2 fundamentals
+  are π − 0.001 rad apart). The link is already present while learning (its φ, started at π, moves by
+  eq 13 by < 1e-3 rad) because a locked coupling term also enlarges the oscillator's radius, which α
+  must absorb; at freeze φ is reset to exactly π.
+
+Offsets: the recorded angles have a non-zero mean (the crouched walking posture) that zero-mean
+oscillators cannot learn. Each DOF's target is q*_k = offset_k + gain_k·Σ_i α_{k,i} x_{k,i}, where
+offset_k is the mean of DOF k over the teaching cycle (CPGNetwork's ``offset``), subtracted from the
+teaching signal before F (eq 10) is formed, and gain_k = RMS_k / 1.39 normalises each DOF to the RMS of
+Fig 2's signal (the band the paper's constants were chosen for). The amplitude command α scales only the
+oscillating part: α = 0 holds the mean posture.
+
+Time: all CPGs share one time scale c = ω_gait / 15 (the stride's fundamental maps onto Fig 2's 15 rad/s
+in internal time), so the ρ = 1 links of eq 13 relate equal frequencies.
+
+Initial frequencies: eq 8's ratio ω_i/ω_0 is meaningful only if oscillator 0 holds the fundamental and
+the others hold integer harmonics. Oscillator 0 of every CPG starts at 0.97·ω_gait; oscillators 1..N−1
+start at 0.97·k·ω_gait for the N−1 harmonics k >= 2 with the largest amplitude in that DOF's teaching
+cycle (Fourier magnitudes of the cycle). The adaptive rule (eq 6) then does the locking and fine tuning.
+The harmonics are seeded on the integer multiples (not 3 % off, as oscillator 0 is): most are weak
+(0.1–2° next to a 9–18° fundamental) and their locking range under τ = 2 phase pinning is narrower than
+a 3 % offset — seeded at 0.99·k they had not locked after 150 strides (free-run error up to 1.3°).
+
+Teaching signal: the recording's last full steady stride (``gait_data.find_steady_cycle``: walk
+5.616–8.129 s, 2.513 s), repeated as a periodic signal (periodic cubic spline through its samples).
+
+Modulation (frozen network): commanded ζ (frequency ratio, negative = backwards) and α (amplitude scale)
+reach the network through a third-order low-pass (three cascaded first-order lags of time constant
+``modulation_time_constant``): the applied ζ(t), α(t) are C², so the target's jerk stays bounded when a
+command steps. (CPGNetwork's own first-order α relaxation is disabled: it is only C⁰ in α̇.)
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from cpg_walker.cpg.network import CPGNetwork, CPGParams
+from cpg_walker.robot.joints import CONTROLLED_JOINTS, JOINT_NAMES, PAPER_LEG_DOFS, SIDES
+
+SCHEMA_VERSION = 1
+DOFS: tuple[str, ...] = CONTROLLED_JOINTS
+B = len(DOFS)
+
+
+def _dof(side: str, paper: str) -> int:
+    return DOFS.index(f"{side}leg_joint_{PAPER_LEG_DOFS[paper]}")
+
+
+#: (child, parent) inter-CPG links of eqs 12–13, 4 per leg (8 learned phases).
+CHAIN: tuple[tuple[int, int], ...] = tuple(
+    (_dof(s, child), _dof(s, parent))
+    for s in SIDES
+    for child, parent in (("Knee", "Hip2"), ("Ankle1", "Knee"), ("Hip1", "Hip2"), ("Ankle2", "Hip1"))
+)
+#: The two Hip2 main oscillators (antisymmetric inter-leg coupling, fixed phase π).
+HIP2_PAIR: tuple[int, int] = (_dof("l", "Hip2"), _dof("r", "Hip2"))
+LEG_PHASE = math.pi
+
+
+@dataclass(frozen=True)
+class HumanoidSettings:
+    """Constants of the humanoid learning (values in config/cpg_humanoid_learning.yaml)."""
+
+    n_oscillators: int = 10
+    reference_omega: float = 15.0  # internal rad/s of the gait's fundamental (Fig 2's lowest component)
+    normalised_rms: float = 4.0  # each DOF's teaching RMS in normalised units (Fig 2's signal: 1.39)
+    seed_factor: float = 0.97  # oscillator 0: ω(0) = seed_factor·ω_gait (the gait frequency is learned)
+    harmonic_seed_factor: float = 1.0  # oscillator i >= 1: ω(0) = harmonic_seed_factor·k_i·ω_gait
+    max_harmonic: int = 20  # harmonics considered when seeding oscillators 1..N−1
+    steps_per_fastest_period: float = 40.0  # learning dt: this many RK4 steps per fastest oscillator period
+    chunk_strides: int = 5  # convergence is checked every chunk
+    max_strides: int = 600  # learning budget
+    tol_omega: float = 1e-3  # max relative change of an active ω over a chunk
+    tol_alpha: float = 1e-2  # max change of an active α over a chunk, relative to its CPG's largest α
+    tol_phi: float = 1e-2  # max change (rad) of an active φ (eq 8) or inter-DOF φ (eq 13) over a chunk
+    tol_error: float = 1e-2  # max change of a DOF's RMS error over a chunk, relative to its teaching RMS
+    active_fraction: float = 0.02  # an oscillator is active if |α| >= this × its CPG's largest |α|
+    converged_chunks: int = 2  # consecutive chunks meeting every tolerance
+    modulation_time_constant: float = 0.25  # s, each of the 3 lags of the ζ/α command filter
+    control_dt: float = 0.002  # s, playback step of the target source (the PID rate)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.n_oscillators, (int, np.integer)) or self.n_oscillators < 1:
+            raise ValueError(f"n_oscillators must be an integer >= 1, got {self.n_oscillators!r}")
+        if self.n_oscillators > self.max_harmonic:
+            raise ValueError(
+                f"n_oscillators ({self.n_oscillators}) exceeds max_harmonic ({self.max_harmonic})")
+
+
+# --------------------------------------------------------------------------------------- teaching cycle
+@dataclass
+class TeachingCycle:
+    """One steady stride of the recording over the 10 DOFs, played periodically."""
+
+    gait: str
+    start: float  # s, in the recording
+    period: float  # s
+    q: np.ndarray  # (n, 10) samples over [start, start + period)
+    dt: float
+    spline: Callable[[np.ndarray], np.ndarray] = field(repr=False)
+
+    def sample(self, times: np.ndarray) -> np.ndarray:
+        """Teaching values (len(times), 10) at times measured from the cycle's start (periodic)."""
+        return self.spline(np.mod(np.asarray(times, dtype=float), self.period))
+
+    @property
+    def omega(self) -> float:
+        return 2 * math.pi / self.period
+
+    def harmonics(self, kmax: int) -> np.ndarray:
+        """Fourier magnitudes (10, kmax + 1) of the cycle, index = harmonic number."""
+        C = np.fft.rfft(self.q - self.q.mean(axis=0), axis=0) * (2.0 / len(self.q))
+        return np.abs(C[: kmax + 1]).T
+
+
+def teaching_cycle(gait_name: str = "walk") -> TeachingCycle:
+    """The steady stride of a packaged recording (or CSV) as a periodic teaching signal."""
+    from scipy.interpolate import CubicSpline
+
+    from cpg_walker.robot.gait_data import find_steady_cycle, load_gait
+
+    gait = load_gait(gait_name)
+    missing = [j for j in DOFS if j not in gait.names]
+    if missing:
+        raise ValueError(f"{gait.source}: the recording lacks controlled joint(s) {missing}")
+    cyc = find_steady_cycle(gait)
+    i0 = round(cyc.start / gait.dt)
+    n = round(cyc.period / gait.dt)
+    q = np.stack([gait.column(j)[i0 : i0 + n] for j in DOFS], axis=1)
+    tt = np.arange(n + 1) * gait.dt
+    closed = np.concatenate([q, q[:1]], axis=0)  # close the loop on the first sample (seam 4e-4 rad)
+    spline = CubicSpline(tt, closed, axis=0, bc_type="periodic")
+    return TeachingCycle(gait.name, float(cyc.start), float(n * gait.dt), q, gait.dt, spline)
+
+
+def initial_omegas(cycle: TeachingCycle, s: HumanoidSettings) -> np.ndarray:
+    """(10, N) internal ω(0): fundamental for oscillator 0, strongest harmonics k >= 2 for the rest."""
+    mags = cycle.harmonics(s.max_harmonic)
+    out = np.empty((B, s.n_oscillators))
+    for b in range(B):
+        ks = 2 + np.argsort(-mags[b, 2:], kind="stable")[: s.n_oscillators - 1]
+        out[b] = s.reference_omega * np.concatenate([[s.seed_factor], s.harmonic_seed_factor * np.sort(ks)])
+    return out
+
+
+# --------------------------------------------------------------------------------------- the controller
+@dataclass
+class LearnReport:
+    """What learning did: strides, convergence, and the per-chunk history of the monitored quantities."""
+
+    converged: bool
+    strides: int
+    learn_time_s: float
+    dt: float
+    wall_time_s: float
+    history: list[dict]
+
+
+class HumanoidCPG:
+    """The 10-DOF CPG controller. Build with `learn(...)` or `load(path)`; the network is then frozen.
+
+    Playback: `step(dt)` advances the network (and the ζ/α command filter), `joint_targets()` gives the
+    10 DOFs' (q*, q̇*). `set_zeta`, `set_alpha` command the modulation; `reset_phase(s)` puts the
+    oscillators at the state they have s seconds after the teaching cycle's start."""
+
+    def __init__(self, net: CPGNetwork, meta: dict, phase_zero_state: np.ndarray, settings: HumanoidSettings):
+        self.net = net
+        self.meta = meta  # teaching/learning facts (serialised as is)
+        self.settings = settings
+        self.phase_zero_state = np.array(phase_zero_state, dtype=float)  # (2, 10, N) x, y at cycle phase 0
+        self.zeta_command = 1.0
+        self.alpha_command = 1.0
+        self._zf = np.ones(3)  # cascaded lag states (ζ)
+        self._af = np.ones(3)  # cascaded lag states (α)
+        self._deriv = np.empty((2, net.B, net.N))
+        self.alpha_learned = net.alpha.copy()  # frozen with amplitude scale 1
+        if not net.learning:
+            self._install_leg_coupling()
+
+    # ------------------------------------------------------------------ construction
+    @staticmethod
+    def build_network(omega0: np.ndarray, params: CPGParams, time_scale: float, offset: np.ndarray,
+                      gain: np.ndarray, **state) -> CPGNetwork:
+        net = CPGNetwork(omega0, params, time_scale=time_scale, offset=offset, gain=gain, **state)
+        for child, parent in CHAIN:
+            net.couple_cpgs(child, parent, phase_offset=None)
+        return net
+
+    def _install_leg_coupling(self) -> None:
+        a, b = HIP2_PAIR
+        self.net.couple_cpgs(a, b, phase_offset=LEG_PHASE)
+        self.net.couple_cpgs(b, a, phase_offset=LEG_PHASE)
+
+    @classmethod
+    def learn(cls, gait: str = "walk", settings: HumanoidSettings | None = None,
+              params: CPGParams | None = None,
+              progress: object | None = None) -> tuple[HumanoidCPG, LearnReport]:
+        """Learn the 10 DOFs of the recording's steady stride (eqs 4–13) until converged; freeze.
+
+        Convergence (checked every `chunk_strides` strides): over the last chunk no active ω moved by more
+        than tol_omega (relative), no active α by more than tol_alpha (of its CPG's largest α), no active
+        eq-8 φ nor any eq-13 inter-DOF φ by more than tol_phi rad, and no DOF's RMS error (P − Q over the
+        chunk's last stride) by more than tol_error of its teaching RMS — for `converged_chunks` chunks in
+        a row. Learning always ends at a whole number of strides, so the final state is the network at
+        the teaching cycle's phase 0 (stored as `phase_zero_state`)."""
+        import time
+
+        s = settings or HumanoidSettings()
+        p = params or CPGParams()
+        p = CPGParams(p.mu, p.gamma, p.epsilon, p.eta, p.tau, 0.0)
+        cyc = teaching_cycle(gait)
+        offset = cyc.q.mean(axis=0)
+        rms = np.sqrt(np.mean((cyc.q - offset) ** 2, axis=0))
+        gain = rms / s.normalised_rms
+        c = cyc.omega / s.reference_omega
+        om0 = initial_omegas(cyc, s)
+        net = cls.build_network(om0, p, c, offset, gain)
+        # The Hip2–Hip2 link is present while learning too: a locked coupling term τ·sin θ = τ·x/r also
+        # pushes the radius (r² -> μ + τ/2γ), so α must be learned with the coupling that plays it back.
+        # Its φ starts at π, evolves by eq 13 (ends within 1e-3 rad of π here) and is reset to π at freeze.
+        a, b = HIP2_PAIR
+        net.couple_cpgs(a, b, phase_offset=LEG_PHASE)
+        net.couple_cpgs(b, a, phase_offset=LEG_PHASE)
+        fastest = float(om0.max()) * c / min(1.0, s.harmonic_seed_factor)  # rad/s
+        dt_max = 2 * math.pi / (s.steps_per_fastest_period * fastest)
+        dt_max = min(dt_max, 0.45 / (c * 2 * p.gamma * p.mu))
+        per_stride = math.ceil(cyc.period / dt_max)
+        dt = cyc.period / per_stride
+        net.check_step(dt)
+        history: list[dict] = []
+        wall0 = time.perf_counter()
+        prev = None
+        good = 0
+        strides = 0
+        converged = False
+        chunk = s.chunk_strides
+        while strides < s.max_strides:
+            err_sq = np.zeros(B)
+            for k in range(chunk * per_stride):
+                t = net.t
+                P = cyc.sample(np.array([t, t + dt / 2, t + dt]))
+                if k >= (chunk - 1) * per_stride:
+                    err_sq += (P[0] - net.output()) ** 2
+                net.step(dt, P)
+            strides += chunk
+            net.t = strides * cyc.period  # keep the clock on the stride grid (no rounding drift)
+            err = np.sqrt(err_sq / per_stride)
+            snap = _snapshot(net, err)
+            if prev is not None:
+                ok, deltas = _stable(prev, snap, rms, s)
+                good = good + 1 if ok else 0
+                history.append({"strides": strides, "rms_error_deg": np.degrees(err).round(4).tolist(),
+                                **deltas})
+            prev = snap
+            if progress is not None:
+                progress.update(strides, f"max err {math.degrees(err.max()):.2f} deg")
+            if good >= s.converged_chunks:
+                converged = True
+                break
+        wall = time.perf_counter() - wall0
+        phase_zero = net.state[:2].copy()
+        net.freeze()
+        meta = {
+            "teaching": {
+                "gait": cyc.gait, "cycle_start_s": cyc.start, "cycle_period_s": cyc.period,
+                "recorded_gait_frequency_hz": 1.0 / cyc.period,
+                "description": "the recording's last full steady stride, repeated periodically",
+            },
+            "learning": {
+                "converged": converged, "strides": strides, "learn_time_s": strides * cyc.period,
+                "dt_s": dt, "wall_time_s": round(wall, 3),
+                "criterion": _criterion_text(s),
+            },
+        }
+        ctrl = cls(net, meta, phase_zero, s)
+        ctrl.meta["learning"]["gait_frequency_hz"] = ctrl.gait_frequency_hz()
+        report = LearnReport(converged, strides, strides * cyc.period, dt, wall, history)
+        return ctrl, report
+
+    # ------------------------------------------------------------------ facts
+    @property
+    def names(self) -> tuple[str, ...]:
+        return DOFS
+
+    @property
+    def period(self) -> float:
+        return float(self.meta["teaching"]["cycle_period_s"])
+
+    def gait_frequency_hz(self) -> float:
+        """Learned gait frequency: mean over the 10 CPGs of the main oscillator's ω (physical), in Hz."""
+        om = self.net.omega[:, 0] * self.net.time_scale
+        return float(np.mean(om) / (2 * math.pi))
+
+    # ------------------------------------------------------------------ playback
+    def reset_phase(self, seconds: float = 0.0) -> None:
+        """Oscillators at phase 0 of the teaching cycle, then run `seconds` (ζ = 1) to reach that phase."""
+        self.net.state[:2] = self.phase_zero_state
+        zc, ac = self.zeta_command, self.alpha_command
+        zf, af = self._zf.copy(), self._af.copy()
+        self.net.set_frequency_scale(1.0)
+        self.net.set_amplitude_scale(1.0)
+        h = self.settings.control_dt
+        n = round(seconds / h)
+        for _ in range(n):
+            self.net.step(h)
+        rest = seconds - n * h
+        if rest > 1e-12:
+            self.net.step(rest)
+        self._zf, self._af = zf, af
+        self.net.set_frequency_scale(float(self._zf[-1]))
+        self.net.set_amplitude_scale(float(self._af[-1]))
+        self.zeta_command, self.alpha_command = zc, ac
+
+    def set_zeta(self, zeta: float) -> None:
+        """Command the frequency ratio ζ (negative = backwards); reached smoothly (C²)."""
+        z = float(zeta)
+        if not math.isfinite(z) or abs(z) > 3.0:
+            raise ValueError(f"zeta must be a finite number in [-3, 3], got {zeta!r}")
+        self.zeta_command = z
+
+    def set_alpha(self, alpha: float) -> None:
+        """Command the amplitude (step-length) scale α >= 0 (0 stops stepping); reached smoothly (C²)."""
+        a = float(alpha)
+        if not math.isfinite(a) or a < 0 or a > 2.0:
+            raise ValueError(f"alpha must be a finite number in [0, 2], got {alpha!r}")
+        self.alpha_command = a
+
+    def set_modulation_state(self, zeta: float, alpha: float) -> None:
+        """Apply ζ, α at once (filters settled): for start-up, not for changes while walking."""
+        self.set_zeta(zeta)
+        self.set_alpha(alpha)
+        self._zf[:] = self.zeta_command
+        self._af[:] = self.alpha_command
+        self.net.set_frequency_scale(self.zeta_command)
+        self.net.set_amplitude_scale(self.alpha_command)
+
+    @property
+    def zeta(self) -> float:
+        """ζ currently applied (filtered)."""
+        return float(self._zf[-1])
+
+    @property
+    def alpha(self) -> float:
+        """α scale currently applied (filtered)."""
+        return float(self._af[-1])
+
+    def _filter(self, state: np.ndarray, command: float, dt: float) -> bool:
+        """Advance the cascaded lags exactly over dt; True if the output changed."""
+        if np.all(state == command):
+            return False
+        T = self.settings.modulation_time_constant
+        if T <= 0:
+            state[:] = command
+            return True
+        d = math.exp(-dt / T)
+        state[0] = command + (state[0] - command) * d
+        state[1] = state[0] + (state[1] - state[0]) * d
+        state[2] = state[1] + (state[2] - state[1]) * d
+        if np.max(np.abs(state - command)) < 1e-9:
+            state[:] = command
+        return True
+
+    def step(self, dt: float) -> None:
+        """Advance the frozen network and the modulation filters by dt (s)."""
+        if self._filter(self._zf, self.zeta_command, dt):
+            self.net.set_frequency_scale(float(self._zf[-1]))
+        if self._filter(self._af, self.alpha_command, dt):
+            self.net.set_amplitude_scale(float(self._af[-1]))
+        self.net.step(dt)
+
+    def joint_targets(self) -> tuple[np.ndarray, np.ndarray]:
+        """(q*, q̇*) of the 10 DOFs: offset + gain·Σ α x and its time derivative (α held)."""
+        net = self.net
+        net.playback_rhs(net.state[:2], None, self._deriv)
+        q = net.output()
+        qd = net.gain * np.einsum("bi,bi->b", net.alpha, self._deriv[0])
+        return q, qd
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict:
+        net = self.net
+        p = net.params
+
+        def fl(a) -> list:
+            return [float(v) for v in np.asarray(a).ravel()]
+
+        dofs = {}
+        for b, name in enumerate(DOFS):
+            dofs[name] = {
+                "offset": float(net.offset[b]), "gain": float(net.gain[b]),
+                "omega": fl(net.omega[b]), "alpha": fl(self.alpha_learned[b]), "phi": fl(net.phi[b]),
+                "x0": fl(self.phase_zero_state[0, b]), "y0": fl(self.phase_zero_state[1, b]),
+            }
+        return {
+            "schema_version": SCHEMA_VERSION,
+            "description": "Humanoid CPG (Righetti & Ijspeert, Sec. III) learned from a recorded walk. "
+                           "Per DOF: target = offset + gain*sum_i alpha_i*x_i; omega in internal rad/s "
+                           "(physical = time_scale*omega); x0, y0 = oscillator state at phase 0 of the "
+                           "teaching cycle; phi[0] of a chain child = learned inter-DOF phase (eq 13).",
+            "n_oscillators": int(net.N),
+            "time_scale": float(net.time_scale[0]),
+            "cpg_params": {k: float(getattr(p, k)) for k in ("mu", "gamma", "epsilon", "eta", "tau")},
+            "chain": [[DOFS[c], DOFS[q]] for c, q in CHAIN],
+            "leg_coupling": {"pair": [DOFS[i] for i in HIP2_PAIR], "phase": float(LEG_PHASE)},
+            "settings": {k: (int(v) if isinstance(v, (int, np.integer)) else float(v))
+                         for k, v in asdict(self.settings).items()},
+            "teaching": self.meta["teaching"],
+            "learning": self.meta["learning"],
+            "dofs": dofs,
+        }
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        text = "# Learned humanoid CPG (cpg-walker learn). Loaded by cpg_node; schema in cpg/humanoid.py.\n"
+        text += yaml.safe_dump(self.to_dict(), sort_keys=False, default_flow_style=None, width=120)
+        path.write_text(text, encoding="utf-8")
+        return path
+
+    @classmethod
+    def from_dict(cls, d: object, where: str = "CPG file") -> HumanoidCPG:
+        return _from_dict(cls, d, where)
+
+    @classmethod
+    def load(cls, path: str | Path) -> HumanoidCPG:
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"learned CPG file not found: {path} (run 'cpg-walker learn --out DIR')")
+        try:
+            d = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+        return cls.from_dict(d, str(path))
+
+
+# --------------------------------------------------------------------------------------- helpers
+def _snapshot(net: CPGNetwork, err: np.ndarray) -> dict:
+    return {"omega": net.omega.copy(), "alpha": net.alpha.copy(), "phi": net.phi.copy(), "err": err}
+
+
+def _stable(prev: dict, cur: dict, teach_rms: np.ndarray, s: HumanoidSettings) -> tuple[bool, dict]:
+    amax = np.max(np.abs(cur["alpha"]), axis=1, keepdims=True)
+    active = np.abs(cur["alpha"]) >= s.active_fraction * amax
+    active[:, 0] = True
+    d_om = float(np.max(np.where(active, np.abs(cur["omega"] - prev["omega"]) / np.abs(cur["omega"]), 0)))
+    d_al = float(np.max(np.where(active, np.abs(cur["alpha"] - prev["alpha"]) / amax, 0)))
+    dphi = np.abs(np.angle(np.exp(1j * (cur["phi"] - prev["phi"]))))
+    learned_phi = active.copy()
+    learned_phi[:, 0] = False
+    for child, _ in CHAIN:
+        learned_phi[child, 0] = True
+    d_ph = float(np.max(np.where(learned_phi, dphi, 0)))
+    d_err = float(np.max(np.abs(cur["err"] - prev["err"]) / teach_rms))
+    ok = d_om < s.tol_omega and d_al < s.tol_alpha and d_ph < s.tol_phi and d_err < s.tol_error
+    return ok, {"d_omega_rel": d_om, "d_alpha_rel": d_al, "d_phi_rad": d_ph, "d_error_rel": d_err}
+
+
+def _criterion_text(s: HumanoidSettings) -> str:
+    return (f"every {s.chunk_strides} strides: active omega change < {s.tol_omega:g} (relative), active "
+            f"alpha change < {s.tol_alpha:g} of the CPG's largest alpha, eq-8/eq-13 phi change < "
+            f"{s.tol_phi:g} rad, per-DOF RMS error change < {s.tol_error:g} of the teaching RMS; "
+            f"{s.converged_chunks} chunks in a row (active: |alpha| >= {s.active_fraction:g} x largest)")
+
+
+def _require(d: dict, key: str, where: str, kind: type | tuple[type, ...]) -> object:
+    if not isinstance(d, dict):
+        raise ValueError(f"{where}: expected a mapping")
+    if key not in d:
+        raise ValueError(f"{where}: missing key '{key}'")
+    v = d[key]
+    if kind is float:
+        kind = (int, float)
+    if not isinstance(v, kind) or (isinstance(v, bool) and kind is not bool):
+        raise ValueError(f"{where}.{key}: expected {getattr(kind, '__name__', 'a number')}, got {v!r}")
+    return v
+
+
+def _numbers(v: object, n: int, where: str) -> np.ndarray:
+    if not isinstance(v, list):
+        raise ValueError(f"{where}: expected a list of {n} numbers, got {type(v).__name__}")
+    if len(v) != n:
+        raise ValueError(f"{where}: has {len(v)} values, expected {n} (n_oscillators)")
+    if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        raise ValueError(f"{where}: every value must be a number, got {v!r}")
+    arr = np.array(v, dtype=float)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{where}: contains NaN or infinite values")
+    return arr
+
+
+def _from_dict(cls: type[HumanoidCPG], d: object, where: str) -> HumanoidCPG:
+    if not isinstance(d, dict):
+        raise ValueError(f"{where}: expected a YAML mapping at the top level, got {type(d).__name__}")
+    ver = _require(d, "schema_version", where, int)
+    if ver != SCHEMA_VERSION:
+        raise ValueError(f"{where}: schema_version {ver} is not supported (this code reads "
+                         f"{SCHEMA_VERSION}); re-run 'cpg-walker learn'")
+    N = _require(d, "n_oscillators", where, int)
+    if N < 1:
+        raise ValueError(f"{where}.n_oscillators: must be >= 1, got {N}")
+    ts = float(_require(d, "time_scale", where, float))
+    if not (math.isfinite(ts) and ts > 0):
+        raise ValueError(f"{where}.time_scale: must be a positive number, got {ts}")
+    cp = _require(d, "cpg_params", where, dict)
+    params = CPGParams(**{k: float(_require(cp, k, f"{where}.cpg_params", float))
+                          for k in ("mu", "gamma", "epsilon", "eta", "tau")}, amplitude_time_constant=0.0)
+    chain = _require(d, "chain", where, list)
+    expected_chain = [[DOFS[c], DOFS[q]] for c, q in CHAIN]
+    if chain != expected_chain:
+        raise ValueError(f"{where}.chain: {chain!r} is not this controller's coupling {expected_chain!r}")
+    leg = _require(d, "leg_coupling", where, dict)
+    if _require(leg, "pair", f"{where}.leg_coupling", list) != [DOFS[i] for i in HIP2_PAIR]:
+        raise ValueError(f"{where}.leg_coupling.pair: must be {[DOFS[i] for i in HIP2_PAIR]}")
+    if float(_require(leg, "phase", f"{where}.leg_coupling", float)) != float(LEG_PHASE):
+        raise ValueError(f"{where}.leg_coupling.phase: must be pi ({LEG_PHASE!r})")
+    st = _require(d, "settings", where, dict)
+    known = HumanoidSettings.__dataclass_fields__
+    unknown = sorted(set(st) - set(known))
+    if unknown:
+        raise ValueError(f"{where}.settings: unknown key(s) {unknown}")
+    try:
+        settings = HumanoidSettings(**{k: (int(v) if known[k].type == "int" else float(v))
+                                       for k, v in st.items()})
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}.settings: {exc}") from None
+    if settings.n_oscillators != N:
+        raise ValueError(f"{where}.settings.n_oscillators ({settings.n_oscillators}) != n_oscillators ({N})")
+    teaching = _require(d, "teaching", where, dict)
+    for k in ("gait", "cycle_start_s", "cycle_period_s", "recorded_gait_frequency_hz"):
+        _require(teaching, k, f"{where}.teaching", str if k == "gait" else float)
+    learning = _require(d, "learning", where, dict)
+    dofs = _require(d, "dofs", where, dict)
+    extra = sorted(set(dofs) - set(DOFS))
+    if extra:
+        raise ValueError(f"{where}.dofs: unknown DOF(s) {extra}; expected {list(DOFS)}")
+    arrays = {k: np.empty((B, N)) for k in ("omega", "alpha", "phi", "x0", "y0")}
+    offset, gain = np.empty(B), np.empty(B)
+    for b, name in enumerate(DOFS):
+        w = f"{where}.dofs.{name}"
+        entry = _require(dofs, name, f"{where}.dofs", dict)
+        offset[b] = float(_require(entry, "offset", w, float))
+        gain[b] = float(_require(entry, "gain", w, float))
+        if not (math.isfinite(offset[b]) and math.isfinite(gain[b]) and gain[b] != 0):
+            raise ValueError(f"{w}: offset must be finite and gain finite and non-zero")
+        for k in arrays:
+            arrays[k][b] = _numbers(_require(entry, k, w, list), N, f"{w}.{k}")
+        if np.any(arrays["omega"][b] <= 0):
+            raise ValueError(f"{w}.omega: learned frequencies must be > 0")
+    net = cls.build_network(arrays["omega"], params, ts, offset, gain, alpha0=arrays["alpha"],
+                            phi0=arrays["phi"], x0=arrays["x0"], y0=arrays["y0"])
+    net.freeze()
+    phase_zero = np.stack([arrays["x0"], arrays["y0"]])
+    return cls(net, {"teaching": teaching, "learning": learning}, phase_zero, settings)
+
+
+# --------------------------------------------------------------------------------------- target source
+class CPGGaitSource:
+    """A run_replay target source (``names`` = all 25 joints, ``targets(t)`` -> (q, q̇)) driven by the CPG.
+
+    Start-up transitions from the standing posture (the recording's first row):
+
+    * ``"recording"`` (default): play the recording's opening steps up to ``handover_s`` (default: the
+      teaching cycle's start, 5.616 s for the walk — the recorded steps from standing into the steady
+      gait), with the CPG started at the matching phase of the teaching cycle, then cross-fade from the
+      recording (continued in its steady cycle) to the CPG over ``blend_s`` (C² smootherstep weight).
+    * ``"standing"``: CPG from t = 0 at phase 0, its oscillating part faded in from α = 0 (the α filter)
+      and the offsets blended from the standing posture to the learned mean posture over ``blend_s``.
+
+    Joints the CPG does not control follow the recording until the hand-over, then hold the teaching
+    cycle's mean (hip yaw ≈ 0, arms at their mean, body, and head/hands at 0 as in the replay).
+    ``schedule``: list of (time_s, zeta, alpha) commands applied when t reaches time_s."""
+
+    def __init__(self, ctrl: HumanoidCPG, transition: str = "recording", handover_s: float | None = None,
+                 blend_s: float = 1.0, schedule: list[tuple[float, float, float]] | None = None,
+                 zeta: float = 1.0, alpha: float = 1.0):
+        from cpg_walker.robot.gait_data import GaitPlayback, find_steady_cycle, load_gait
+
+        if transition not in ("recording", "standing"):
+            raise ValueError(f"unknown transition {transition!r}; use 'recording' or 'standing'")
+        if not (blend_s >= 0 and math.isfinite(blend_s)):
+            raise ValueError(f"blend_s must be >= 0, got {blend_s}")
+        self.ctrl = ctrl
+        self.names = JOINT_NAMES
+        self.transition = transition
+        gait = load_gait(ctrl.meta["teaching"]["gait"])
+        self.playback = GaitPlayback(gait, cycle=find_steady_cycle(gait))
+        self.standing = self.playback.standing_posture()
+        cyc_start = float(ctrl.meta["teaching"]["cycle_start_s"])
+        self.handover = cyc_start if handover_s is None else float(handover_s)
+        if transition == "standing":
+            self.handover = 0.0
+        if self.handover < 0:
+            raise ValueError(f"handover_s must be >= 0, got {handover_s}")
+        self.blend = float(blend_s)
+        self._idx = np.array([JOINT_NAMES.index(j) for j in DOFS])
+        i0 = round(cyc_start / gait.dt)
+        n = round(ctrl.period / gait.dt)
+        hold = np.zeros(len(JOINT_NAMES))
+        for j, name in enumerate(JOINT_NAMES):
+            if name in gait.names:
+                hold[j] = gait.column(name)[i0 : i0 + n].mean()
+        self.hold = hold
+        self.schedule = sorted(schedule or [])
+        h = ctrl.settings.control_dt
+        self.h = h
+        # CPG phase at the hand-over: the recording time handover maps to this time within the cycle
+        phase_s = (self.handover - cyc_start) % ctrl.period if transition == "recording" else 0.0
+        ctrl.reset_phase(phase_s)
+        if transition == "standing":
+            ctrl.set_modulation_state(zeta, 0.0)
+            ctrl.set_alpha(alpha)
+        else:
+            ctrl.set_modulation_state(zeta, alpha)
+        self._t_net = self.handover  # sim time the network state corresponds to
+        self._cache = None
+
+    def _advance(self, t: float) -> None:
+        while self.schedule and self.schedule[0][0] <= t + 1e-12:
+            _, z, a = self.schedule.pop(0)
+            self.ctrl.set_zeta(z)
+            self.ctrl.set_alpha(a)
+        while self._t_net + 0.5 * self.h <= t:
+            self.ctrl.step(self.h)
+            self._t_net += self.h
+
+    def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        if t < self.handover:
+            return self.playback.targets(t)
+        self._advance(t)
+        qc, qdc = self.ctrl.joint_targets()
+        q = self.hold.copy()
+        qd = np.zeros(len(JOINT_NAMES))
+        u = (t - self.handover) / self.blend if self.blend > 0 else 1.0
+        if u >= 1.0:
+            q[self._idx] = qc
+            qd[self._idx] = qdc
+            return q, qd
+        w, dw = _smootherstep(u)
+        dw /= self.blend
+        if self.transition == "recording":
+            q0, qd0 = self.playback.targets(t)
+        else:
+            q0 = self.standing.copy()
+            qd0 = np.zeros(len(JOINT_NAMES))
+            q0[self._idx] = self.standing[self._idx] + (qc - self.ctrl.net.offset)  # sway about standing
+            qd0[self._idx] = qdc
+        q[self._idx] = qc
+        qd[self._idx] = qdc
+        q_out = (1 - w) * q0 + w * q
+        qd_out = (1 - w) * qd0 + w * qd + dw * (q - q0)
+        return q_out, qd_out
+
+
+def _smootherstep(u: float) -> tuple[float, float]:
+    """w(u) = 6u⁵ − 15u⁴ + 10u³ on [0, 1] (C², zero slope and curvature at both ends) and dw/du."""
+    u = min(max(u, 0.0), 1.0)
+    return u**3 * (10 - 15 * u + 6 * u * u), 30 * u * u * (1 - u) ** 2
