@@ -1,0 +1,124 @@
+"""In-process CPG walk (no ROS): the learned humanoid CPG drives the PID servos of the simulated HOAP-2.
+
+Same loop as the recorded replay (experiments/replay.py: PID torque law at 500 Hz on 2 ms old state);
+the target source is `cpg.humanoid.CPGGaitSource` (start-up transition, then the frozen CPG, optional
+ζ/α schedule). `cpg-walker cpg-walk` writes DIR/walk.json (replay.json's keys + zeta, alpha, feedback,
+n_oscillators, transition, the CPG file) and a side-camera filmstrip.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from cpg_walker.cpg.humanoid import CPGGaitSource, HumanoidCPG
+from cpg_walker.experiments.replay import run_replay, summarize
+
+DEFAULT_CPG_FILE = "cpg_humanoid.yaml"
+
+
+def load_controller(cpg_file: str | None, n_oscillators: int | None = None) -> tuple[HumanoidCPG, str]:
+    """The learned controller: `cpg_file`, else config/cpg_humanoid.yaml if it has the requested N,
+    else learn now (`n_oscillators`, default settings). Returns (controller, where it came from)."""
+    from cpg_walker.cpg.humanoid import HumanoidSettings
+    from cpg_walker.experiments.learn import learning_settings
+
+    if cpg_file is not None:
+        ctrl = HumanoidCPG.load(cpg_file)
+        if n_oscillators is not None and ctrl.net.N != n_oscillators:
+            raise ValueError(
+                f"{cpg_file} has {ctrl.net.N} oscillators per DOF, --oscillators asks {n_oscillators}")
+        return ctrl, str(cpg_file)
+    try:
+        from cpg_walker.paths import config_path
+
+        path = config_path(DEFAULT_CPG_FILE)
+        ctrl = HumanoidCPG.load(path)
+        if n_oscillators is None or ctrl.net.N == n_oscillators:
+            return ctrl, str(path)
+    except FileNotFoundError:
+        pass
+    settings, params = learning_settings(n_oscillators)
+    ctrl, _ = HumanoidCPG.learn(settings=settings, params=params)
+    assert isinstance(settings, HumanoidSettings)
+    return ctrl, f"learned at start-up (N = {ctrl.net.N})"
+
+
+def walk(ctrl: HumanoidCPG, duration: float, zeta: float = 1.0, alpha: float = 1.0,
+         transition: str = "recording", blend_s: float = 1.0, handover_s: float | None = None,
+         schedule: list[tuple[float, float, float]] | None = None, on_log=None, progress=None) -> dict:
+    """One walk from standing; returns the replay metrics plus the run's settings."""
+    from cpg_walker.robot.hoap2 import Hoap2Sim
+    from cpg_walker.robot.pid import PidLaw, load_pid_config
+
+    if not (duration > 0 and math.isfinite(duration)):
+        raise ValueError(f"--duration must be a positive number of seconds, got {duration}")
+    source = CPGGaitSource(ctrl, transition=transition, handover_s=handover_s, blend_s=blend_s,
+                           schedule=schedule, zeta=zeta, alpha=alpha)
+    cfg = load_pid_config()
+    sim = Hoap2Sim()
+    sim.reset()
+    pid = PidLaw.from_config(config=cfg)
+    result = run_replay(sim, source, pid, duration, rate_hz=float(cfg.get("rate_hz", 500)),
+                        delay_s=float(cfg.get("delay_s", 0.002)), progress=progress, on_log=on_log)
+    m = summarize(result, period_s=ctrl.period / abs(zeta) if zeta else None)
+    m.update({
+        "zeta": zeta, "alpha": alpha, "feedback": False, "n_oscillators": int(ctrl.net.N),
+        "transition": transition, "handover_s": round(source.handover, 3), "blend_s": blend_s,
+        "schedule": [list(s) for s in (schedule or [])],
+        "touchdowns_s": {k: [round(x, 3) for x in v] for k, v in result.touchdowns.items()},
+    })
+    after = [x for x in result.touchdowns["right"] if x > source.handover + blend_s]
+    if len(after) > 2:
+        m["right_touchdown_interval_after_handover_s"] = round(float(np.median(np.diff(after))), 3)
+    # step length: forward distance per step, over the CPG-driven part only
+    i0 = int(np.searchsorted(result.t, source.handover + blend_s))
+    if i0 < len(result.t) - 1:
+        h0 = float(result.heading[0])
+        fwd = np.array([math.cos(h0), math.sin(h0)])
+        d = float((result.base_xy[-1] - result.base_xy[i0]) @ fwd)
+        n_steps = sum(1 for side in ("left", "right") for x in result.touchdowns[side]
+                      if x > result.t[i0])
+        span = float(result.t[-1] - result.t[i0])
+        m["cpg_part"] = {"from_s": round(float(result.t[i0]), 3), "distance_m": round(d, 4),
+                         "speed_mps": round(d / span, 4) if span > 0 else 0.0, "steps": n_steps,
+                         "step_length_m": round(d / n_steps, 4) if n_steps else None}
+    return m
+
+
+def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float = 1.0, alpha: float = 1.0,
+                 n_oscillators: int | None = None, cpg_file: str | None = None, transition: str = "recording",
+                 blend_s: float = 1.0, schedule: list[tuple[float, float, float]] | None = None,
+                 render: bool = True, progress_enabled: bool = True) -> dict:
+    """`cpg-walker cpg-walk`: walk, write DIR/walk.json and DIR/filmstrip.png."""
+    from cpg_walker.cli.progress import Progress
+
+    ctrl, origin = load_controller(cpg_file, n_oscillators)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    grabber = None
+    if render:
+        from cpg_walker.experiments.render import FrameGrabber
+        from cpg_walker.robot.hoap2 import Hoap2Sim
+
+        grabber = FrameGrabber(Hoap2Sim().model, every_s=max(0.2, duration / 40), width=400, height=300)
+    progress = Progress(duration, f"cpg-walk N={ctrl.net.N}", enabled=progress_enabled)
+    m = walk(ctrl, duration, zeta, alpha, transition, blend_s, schedule=schedule, on_log=grabber,
+             progress=progress)
+    progress.close()
+    m["cpg_file"] = origin
+    m["learned_gait_frequency_hz"] = ctrl.gait_frequency_hz()
+    if grabber is not None:
+        from cpg_walker.experiments.render import write_filmstrip
+
+        status = f"fell at {m['fall_time_s']} s" if m["fell"] else "no fall"
+        title = (f"HOAP-2, CPG N={ctrl.net.N}, zeta={zeta}, alpha={alpha}: "
+                 f"{m['distance_m']:.2f} m in {m['duration_s']:.1f} s, {status}")
+        strip = write_filmstrip(grabber.frames, grabber.times, out / "filmstrip.png", title=title)
+        m["filmstrip"] = str(strip)
+        grabber.close()
+    (out / "walk.json").write_text(json.dumps(m, indent=2) + "\n")
+    return m
