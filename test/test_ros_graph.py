@@ -248,3 +248,33 @@ def test_replay_through_the_graph_walks(tmp_path):
     assert report["fell"] is False and report["duration_s"] == pytest.approx(6.0, abs=0.02)
     assert report["distance_m"] > 0.3 and report["steps"] >= 3
     assert abs(report["lateral_drift_m"]) < 0.1
+
+
+def test_pid_gains_are_runtime_parameters_and_validated(graph, probe):
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import GetParameters, SetParameters
+
+    graph.start("pid_node")
+    client = probe.node.create_client(SetParameters, "/pid/set_parameters")
+    assert client.wait_for_service(timeout_sec=20.0), graph.procs["pid_node"].log()
+
+    def set_param(name: str, value: ParameterValue):
+        future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
+        assert probe.spin_for(10.0, until=future.done)
+        return future.result().results[0]
+
+    def double(x: float) -> ParameterValue:
+        return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=x)
+
+    for bad in (math.nan, -1.0, 1e9):
+        result = set_param("kp.leg", double(bad))
+        assert not result.successful and result.reason, bad
+    wrong_type = set_param("kd.arm", ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="x"))
+    assert not wrong_type.successful
+    assert set_param("kp.leg", double(120.0)).successful
+    get = probe.node.create_client(GetParameters, "/pid/get_parameters")
+    assert get.wait_for_service(timeout_sec=10.0)
+    future = get.call_async(GetParameters.Request(names=["kp.leg", "target_timeout"]))
+    assert probe.spin_for(10.0, until=future.done)
+    values = future.result().values
+    assert values[0].double_value == 120.0 and values[1].double_value == pytest.approx(0.1)
