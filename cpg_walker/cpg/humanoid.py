@@ -592,7 +592,9 @@ class CPGGaitSource:
 
     Joints the CPG does not control follow the recording until the hand-over, then hold the teaching
     cycle's mean (hip yaw ≈ 0, arms at their mean, body, and head/hands at 0 as in the replay).
-    ``schedule``: list of (time_s, zeta, alpha) commands applied when t reaches time_s."""
+    ``schedule``: list of (time_s, zeta, alpha) commands applied when t reaches time_s. With the
+    "recording" transition, `zeta`/`alpha` other than 1 are commanded when the cross-fade ends (the CPG
+    takes over the recording at the recording's pace first)."""
 
     def __init__(self, ctrl: HumanoidCPG, transition: str = "recording", handover_s: float | None = None,
                  blend_s: float = 1.0, schedule: list[tuple[float, float, float]] | None = None,
@@ -633,8 +635,10 @@ class CPGGaitSource:
         if transition == "standing":
             ctrl.set_modulation_state(zeta, 0.0)
             ctrl.set_alpha(alpha)
-        else:
-            ctrl.set_modulation_state(zeta, alpha)
+        else:  # take over the recording at its own pace; the requested ζ, α are commanded after the blend
+            ctrl.set_modulation_state(1.0, 1.0)
+            if (zeta, alpha) != (1.0, 1.0):
+                self.schedule = sorted([*self.schedule, (self.handover + self.blend, zeta, alpha)])
         self._t_net = self.handover  # sim time the network state corresponds to
         self._cache = None
 
