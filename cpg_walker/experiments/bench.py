@@ -18,6 +18,7 @@ from pathlib import Path
 SECTIONS: dict[str, str] = {
     "cpg": "cpg_walker.experiments.bench_cpg:run",
     "robot": "cpg_walker.experiments.bench_robot:run",
+    "humanoid": "cpg_walker.experiments.bench_humanoid:run",
 }
 
 
