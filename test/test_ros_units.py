@@ -45,6 +45,31 @@ def test_bad_commands_are_rejected_with_a_reason(names, pos, vel, reason):
         validate_joint_command(names, pos, vel)
 
 
+def test_rejections_are_throttled_per_reason():
+    from cpg_walker.nodes.runtime import Throttle
+    from cpg_walker.nodes.validation import reason_key
+
+    class Log:
+        def __init__(self):
+            self.lines = []
+
+        def get_logger(self):
+            return self
+
+        def warn(self, text):
+            self.lines.append(text)
+
+    node, throttle = Log(), Throttle(period=60.0)
+    for _ in range(3):
+        for bad in (["head_joint_1", "x"], ["head_joint_1", "head_joint_1"]):
+            try:
+                validate_joint_command(bad, [0.0, 0.0])
+            except ValueError as exc:
+                throttle.warn(node, reason_key(exc), str(exc))
+    assert len(node.lines) == 2 and "unknown" in node.lines[0] and "duplicate" in node.lines[1]
+    assert throttle.suppressed == {"unknown joint": 2, "duplicate joint": 2}
+
+
 def test_torque_commands_require_effort():
     with pytest.raises(ValueError, match="no effort"):
         validate_joint_command(["head_joint_1"], [0.0], require="effort")

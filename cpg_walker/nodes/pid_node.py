@@ -31,8 +31,8 @@ def _make_node():
     from sensor_msgs.msg import JointState
 
     from cpg_walker.nodes.messages import JointStateBuilder, read_joint_command, stamp_ns
-    from cpg_walker.nodes.runtime import ActivityStats, HotPath, exit_log
-    from cpg_walker.nodes.validation import check_finite_scalar
+    from cpg_walker.nodes.runtime import ActivityStats, HotPath, Throttle, exit_log
+    from cpg_walker.nodes.validation import check_finite_scalar, reason_key
     from cpg_walker.robot.hoap2 import default_standing_posture
     from cpg_walker.robot.joints import JOINT_NAMES, MAX_TORQUE_NM
     from cpg_walker.robot.pid import PidLaw, load_pid_config
@@ -98,6 +98,7 @@ def _make_node():
             subs = [self.create_subscription(JointState, "/joint_targets", self._on_target, 10),
                     self.create_subscription(JointState, "/joint_states", self._on_state, 10)]
             self.activity = ActivityStats()
+            self.throttle = Throttle(1.0)
             self.hot = HotPath(self, subs)
             self.idle = self._check_wait
             self._ok = rclpy.ok
@@ -146,7 +147,8 @@ def _make_node():
             try:
                 cmd = read_joint_command(msg, require="position")
             except ValueError as exc:
-                self.get_logger().warn(f"rejected /joint_targets: {exc}", throttle_duration_sec=1.0)
+                self.throttle.warn(self, reason_key(exc),
+                                   f"rejected /joint_targets: {exc}")
                 return
             if self.lockstep:
                 t = stamp_ns(msg)

@@ -23,6 +23,27 @@ def parse_cli(prog: str, description: str, interface: str, argv: list[str] | Non
     return argv
 
 
+class Throttle:
+    """Warnings throttled per reason (rclpy's throttle is per call site, so one reason would hide the
+    others): ``warn(node, key, text)`` logs at most once per ``period`` wall seconds for each key."""
+
+    def __init__(self, period: float = 1.0) -> None:
+        self.period = period
+        self.last: dict[str, float] = {}
+        self.suppressed: dict[str, int] = {}
+
+    def warn(self, node, key: str, text: str) -> None:
+        import time
+
+        now = time.monotonic()
+        if now - self.last.get(key, -1e9) < self.period:
+            self.suppressed[key] = self.suppressed.get(key, 0) + 1
+            return
+        n = self.suppressed.pop(key, 0)
+        self.last[key] = now
+        node.get_logger().warn(text + (f" ({n} more since the last warning)" if n else ""))
+
+
 def exit_log(node, text: str) -> None:
     """Log at exit: through the node's logger while its context is up, else on stderr (after SIGINT
     rclpy has already shut the context down, and /rosout can no longer be published)."""

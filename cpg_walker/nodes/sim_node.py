@@ -51,9 +51,9 @@ def _make_node():
         read_joint_command,
         stamp_ns,
     )
-    from cpg_walker.nodes.runtime import HotPath, exit_log
+    from cpg_walker.nodes.runtime import HotPath, Throttle, exit_log
     from cpg_walker.nodes.sim_core import Pusher, RunRecord, latency_summary, sole_wrenches
-    from cpg_walker.nodes.validation import check_finite_scalar, period_ns
+    from cpg_walker.nodes.validation import check_finite_scalar, period_ns, reason_key
     from cpg_walker.robot.hoap2 import Hoap2Sim
     from cpg_walker.robot.joints import JOINT_NAMES
 
@@ -109,6 +109,7 @@ def _make_node():
                                                                          / self.period_ns)) / 1e9)
             self.record_every = max(1, round(self.record.log_dt * 1e9 / self.period_ns))
             self.pusher = Pusher(self.sim)
+            self.throttle = Throttle(1.0)
             self.add_on_set_parameters_callback(self._on_set)
 
             self.pub_clock = self.create_publisher(Clock, "/clock", 10)
@@ -184,7 +185,8 @@ def _make_node():
             try:
                 cmd = read_joint_command(msg, require="effort")
             except ValueError as exc:
-                self.get_logger().warn(f"rejected /joint_torques: {exc}", throttle_duration_sec=1.0)
+                self.throttle.warn(self, reason_key(exc),
+                                   f"rejected /joint_torques: {exc}")
                 return
             t = stamp_ns(msg)
             if t < self.tau_stamp:
@@ -285,8 +287,11 @@ def _make_node():
                 now = time.perf_counter()
                 self.slow_spin(now)
                 if self.tau_stamp != t_ns and now - last > self.resend_s:
-                    self.get_logger().warn(f"waiting for controller: no /joint_torques stamped "
-                                           f"{t_ns / 1e9:.3f} s yet", throttle_duration_sec=2.0)
+                    text = f"waiting for controller: no /joint_torques stamped {t_ns / 1e9:.3f} s yet"
+                    if self.k == 0:  # start-up: the controller's discovery is still under way
+                        self.get_logger().info(text, throttle_duration_sec=2.0)
+                    else:
+                        self.get_logger().warn(text, throttle_duration_sec=2.0)
                     self.resend_state(t_ns)
                     last = now
             return True

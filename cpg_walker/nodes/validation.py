@@ -69,6 +69,12 @@ def validate_joint_command(
     return JointCommand(idx, fields["position"], fields["velocity"], fields["effort"])
 
 
+def reason_key(error: Exception | str) -> str:
+    """The kind of a rejection (its first two words, e.g. 'unknown joint', 'position has'), used to
+    throttle warnings per reason rather than per message."""
+    return " ".join(str(error).split()[:2])
+
+
 def to_ns(sec: int, nanosec: int) -> int:
     """A ROS stamp (sec, nanosec) as integer nanoseconds."""
     return int(sec) * 1_000_000_000 + int(nanosec)
