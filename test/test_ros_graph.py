@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import signal
 import time
 
 import numpy as np
@@ -199,6 +201,11 @@ def test_watchdog_holds_the_last_target_posture(graph, probe):
     assert "targets stale" in log and "holding the last target posture" in log
     assert _head(probe) == pytest.approx(0.4, abs=0.05)  # held, not back to the default posture (0)
     assert graph.procs["sim_node"].popen.poll() is None
+    for proc in graph.procs.values():  # SIGTERM: a clean exit, status 0, no traceback
+        os.kill(proc.pid, signal.SIGTERM)
+    for proc in graph.procs.values():
+        assert proc.popen.wait(timeout=10) == 0, proc.log()[-1500:]
+        assert "Traceback" not in proc.log()
 
 
 def test_bad_messages_never_reach_the_robot(graph, probe):

@@ -90,6 +90,7 @@ class HotPath:
         from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
         self.subs = list(subscriptions)
+        self.context = node.context
         self.wait_set = _rclpy.WaitSet(len(self.subs), 0, 0, 0, 0, 0, node.context.handle)
 
     def drain(self) -> int:
@@ -106,15 +107,20 @@ class HotPath:
 
     def poll(self, timeout_s: float = 0.0) -> int:
         """Drain; if nothing was waiting, block up to ``timeout_s`` for a message and drain again."""
-        n = self.drain()
-        if n or timeout_s <= 0:
-            return n
-        ws = self.wait_set
-        ws.clear_entities()
-        for sub in self.subs:
-            ws.add_subscription(sub.handle)
-        ws.wait(int(timeout_s * 1e9))
-        return self.drain()
+        try:
+            n = self.drain()
+            if n or timeout_s <= 0:
+                return n
+            ws = self.wait_set
+            ws.clear_entities()
+            for sub in self.subs:
+                ws.add_subscription(sub.handle)
+            ws.wait(int(timeout_s * 1e9))
+            return self.drain()
+        except Exception:
+            if self.context.ok():
+                raise
+            return 0  # SIGINT/SIGTERM shut the context down while we were waiting: the caller stops
 
 
 def spin_hot(node, hot: HotPath, executor_period: float = 0.02, idle=None) -> None:
@@ -163,6 +169,10 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
     except ValueError as exc:  # bad parameters at start-up: one clear line, no traceback
         print(f"{argv[0]}: error: {exc}", file=sys.stderr)
         status = 2
+    except Exception:
+        if rclpy.ok():
+            raise
+        # a signal shut the context down mid-call (publish, wait): that is a normal stop
     finally:
         import signal
 
