@@ -1,0 +1,44 @@
+"""`cpg-walker walk --duration S --zeta Z --alpha A [--feedback off] --out DIR`: the learned CPG walking
+the simulated HOAP-2 through the ROS graph (sim_node + pid_node + cpg_node); writes DIR/walk.json."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("walk", help="CPG walk through the ROS graph (three node processes); write walk.json")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--duration", type=float, default=60.0, metavar="S", help="sim seconds (default 60)")
+    p.add_argument("--zeta", type=float, default=1.0, metavar="Z",
+                   help="frequency ratio of the oscillators, in [-2, 2] (default 1)")
+    p.add_argument("--alpha", type=float, default=1.0, metavar="A",
+                   help="amplitude (step length) scale, in [0, 2] (default 1)")
+    p.add_argument("--feedback", choices=("on", "off"), default="off",
+                   help="sensory feedback (eqs 14-20); only 'off' exists so far")
+    p.add_argument("--cpg-file", default="cpg_humanoid.yaml", metavar="FILE",
+                   help="learned CPG YAML (default config/cpg_humanoid.yaml, N=3; '' = cpg_node learns it)")
+    p.add_argument("--pacing", choices=("lockstep", "realtime", "fast"), default="lockstep",
+                   help="the sim node's pacing (default lockstep: deterministic)")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    import json
+
+    from cpg_walker.cli.main import UserError
+
+    if args.feedback == "on":
+        raise UserError("--feedback on is not implemented yet (sensory feedback, eqs 14-20, is the next "
+                        "issue); use --feedback off")
+    from cpg_walker.experiments.walk_graph import run_graph_walk
+
+    report = run_graph_walk(args.out, duration=args.duration, zeta=args.zeta, alpha=args.alpha,
+                            cpg_file=args.cpg_file, pacing=args.pacing)
+    keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps",
+            "lateral_drift_m", "heading_change_deg", "zeta", "alpha", "feedback", "real_time_factor")
+    print(json.dumps({k: report[k] for k in keys}))
+    fall = f"fell at {report['fall_time_s']} s" if report["fell"] else "no fall"
+    print(f"walked {report['distance_m']:.3f} m in {report['duration_s']:.1f} s "
+          f"({report['mean_speed_mps']:.3f} m/s), {fall}; walk.json in {args.out}")
+    return 0
