@@ -17,8 +17,11 @@ Rules (documented choices, not in the paper):
   are the periodogram's local maxima with amplitude >= `peak_threshold` of the largest (Hann window).
 * Initial frequencies (`initial_omegas`): each of the N strongest significant components gets an
   oscillator started at `seed_factor`·ω_peak (0.97: 3 % off, the adaptive rule does the locking and
-  the fine tuning); oscillators beyond the number of components are spread uniformly over
-  [`spread_low`·ω_lo, `spread_high`·ω_hi]. Why not the paper's blind spread: with the paper's
+  the fine tuning). When more oscillators are asked for than there are significant components, the
+  extra ones are seeded the same way at the next-strongest *weak* components (periodogram maxima down
+  to `weak_peak_floor` of the largest, ignoring maxima within `weak_peak_exclusion_bins` resolution
+  bins 2π/T of a stronger one: the Hann window's side lobes), and any still left over are spread
+  uniformly over [`spread_low`·ω_lo, `spread_high`·ω_hi]. Why not the paper's blind spread: with the paper's
   constants, Fig 2's spread [6, 70] needs ~950 s for the lowest oscillator to climb to 15 rad/s, and a
   blind spread left a weak component (amplitude 0.3 next to 0.7) unlearned after 300 internal
   seconds in our trials. Oscillator 0 — the phase reference — is the lowest. The default N is the
@@ -83,8 +86,10 @@ class TeachingSettings:
     peak_threshold: float = 0.1
     spread_low: float = 0.8
     spread_high: float = 1.1
-    steps_per_fastest_period: float = 30.0
-    seed_factor: float = 0.97  # dt = 2π/(this·fastest internal ω) -> ω·dt ≈ 0.21
+    steps_per_fastest_period: float = 30.0  # dt = 2π/(this·fastest internal ω) -> ω·dt ≈ 0.21
+    seed_factor: float = 0.97
+    weak_peak_floor: float = 5e-4  # extra oscillators: weak components down to this fraction of the largest
+    weak_peak_exclusion_bins: float = 12.0  # ... not within this many bins 2π/T of a stronger maximum
 
 
 def uniform_resample(
@@ -119,13 +124,39 @@ def spectral_peaks(tu: np.ndarray, vu: np.ndarray, threshold: float) -> list[np.
     return peaks
 
 
-def initial_omegas(peaks_internal: np.ndarray, N: int, s: TeachingSettings) -> np.ndarray:
+def weak_peaks(tu: np.ndarray, vu: np.ndarray, strong: list[np.ndarray], floor: float,
+               exclusion_bins: float) -> list[np.ndarray]:
+    """Per column: further periodogram maxima (rad/s, strongest first) with amplitude >= floor·largest,
+    not in `strong` and not within `exclusion_bins`·2π/T of a stronger maximum (Hann side lobes)."""
+    if floor <= 0:
+        return [np.empty(0) for _ in strong]
+    all_peaks = spectral_peaks(tu, vu, floor)
+    width = exclusion_bins * 2 * np.pi / (tu[-1] - tu[0])
+    out = []
+    for cand, st in zip(all_peaks, strong, strict=True):
+        kept: list[float] = list(st)
+        extra = []
+        for w in cand:  # strongest first
+            if kept and np.min(np.abs(np.asarray(kept) - w)) <= width:
+                continue
+            kept.append(float(w))
+            extra.append(float(w))
+        out.append(np.asarray(extra))
+    return out
+
+
+def initial_omegas(peaks_internal: np.ndarray, N: int, s: TeachingSettings,
+                   weak_internal: np.ndarray | None = None) -> np.ndarray:
     """ω(0) for N oscillators (internal units, ascending; oscillator 0 = lowest = phase reference).
 
-    The N strongest components (peaks sorted by strength) each get an oscillator started at
-    `seed_factor`·ω_peak (a little off, so the adaptive rule still does the locking); if N exceeds the
-    number of components, the rest are spread uniformly over [spread_low·ω_lo, spread_high·ω_hi]."""
-    chosen = s.seed_factor * np.asarray(peaks_internal[:N])
+    The N strongest components (peaks sorted by strength, then the weak ones `weak_internal`) each get
+    an oscillator started at `seed_factor`·ω_peak (a little off, so the adaptive rule still does the
+    locking); if N exceeds the number of components, the rest are spread uniformly over
+    [spread_low·ω_lo, spread_high·ω_hi]."""
+    ranked = np.asarray(peaks_internal)
+    if weak_internal is not None and ranked.size < N:
+        ranked = np.concatenate([ranked, np.asarray(weak_internal)])
+    chosen = s.seed_factor * ranked[:N]
     extra = N - chosen.size
     if extra > 0:
         lo = s.spread_low * float(np.min(peaks_internal))
@@ -192,7 +223,12 @@ def plan_teaching(
     w_lo = np.array([p.min() for p in peaks])
     time_scale = w_lo / s.reference_omega
     N = n_oscillators if n_oscillators is not None else max(len(p) for p in peaks)
-    omega0 = np.stack([initial_omegas(p / c, N, s) for p, c in zip(peaks, time_scale, strict=True)])
+    if N > min(len(p) for p in peaks):
+        weak = weak_peaks(tu, vu, peaks, s.weak_peak_floor, s.weak_peak_exclusion_bins)
+    else:
+        weak = [np.empty(0) for _ in peaks]
+    omega0 = np.stack([initial_omegas(p / c, N, s, wk / c)
+                       for p, wk, c in zip(peaks, weak, time_scale, strict=True)])
     hi = omega0.max(axis=1)
     fastest = float(np.max(hi * time_scale))  # rad/s
     dt = 2 * np.pi / (s.steps_per_fastest_period * fastest)

@@ -48,6 +48,7 @@ def fit_signal(
     cfg: dict | None = None,
     progress_label: str | None = None,
     duration_internal: float | None = None,
+    free_run_internal: float | None = None,
 ) -> FitResult:
     """Learn `values` (n,) or (n, B) sampled at times `t` (s); returns the frozen network and metrics."""
     from cpg_walker.cli.progress import Progress
@@ -69,7 +70,7 @@ def fit_signal(
     records: list[tch.LearningRecord] = []
     good_chunks = 0
     last_omega = net.frequencies().copy()
-    while net.t < budget - 1e-9:
+    while budget - net.t >= plan.dt:  # a remainder shorter than one step would record nothing
         rec = tch.learn(net, plan.sample, plan.dt, min(chunk, budget - net.t), record_dt=record_dt)
         records.append(rec)
         progress.update(net.t)
@@ -92,7 +93,7 @@ def fit_signal(
     ])
     learn_time = net.t
     net.freeze()
-    free_len = max(10.0, float(fc["free_run_internal"]) / c_min)
+    free_len = max(10.0, float(free_run_internal or fc["free_run_internal"]) / c_min)
     ft, fQ = tch.free_run(net, plan.dt, free_len)
     fP = plan.sample(ft)
     rms_err = np.sqrt(np.mean((fQ - fP) ** 2, axis=0))
