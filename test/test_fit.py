@@ -83,4 +83,9 @@ def test_random_multisines_learn_frequencies_within_1_percent(base, harmonics, a
     r = fit_signal(t, v, len(hs))
     got = np.sort(r.net.frequencies()[0])
     np.testing.assert_allclose(got, w, rtol=0.01)
-    assert r.free_run_rms_error[0] < 0.1 * r.teaching_rms[0]
+    if all(h % hs[0] == 0 for h in hs):
+        # The waveform is reproduced only when every component is a whole multiple of the lowest one
+        # (oscillator 0): eq 8's reference R_i = (ω_i/ω_0)·θ_0 is built on the wrapped phase θ_0, so for a
+        # non-integer ratio (e.g. 2 and 3 rad/s) it jumps at every wrap and the phase relations are lost
+        # (network.py docstring, eq 8); the frequencies are still learned (asserted above).
+        assert r.free_run_rms_error[0] < 0.1 * r.teaching_rms[0]

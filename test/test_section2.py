@@ -62,6 +62,7 @@ def test_fig3_perturbation_recovers(runs):
     assert f3["perturbation_max_deviation"] > 10 * f3["tolerance"]  # a real perturbation
     rec = f3["perturbation_recovery_s"]
     assert 0 < rec < 5.5  # recovered within the run (perturbation at 1 s, run ends at 7 s)
+    assert 0 < f3["perturbation_recovery_10pct_s"] <= rec
     t, Q = c["t"], c["Q"]
     tail = (t > 1 + rec) & np.isfinite(c["shifted_ref"])
     assert np.max(np.abs(Q[tail, 1] - c["shifted_ref"][tail])) < f3["tolerance"]

@@ -141,6 +141,7 @@ def run_fig3(net: CPGNetwork, cfg: dict) -> tuple[dict, dict]:
     out["perturbation_phase_shift_rad"] = shift
     out["perturbation_time_shift_s"] = delay
     out["perturbation_recovery_s"] = _settle_time(t[ok], dev[ok], tp, float(t[ok][-1]), tol)
+    out["perturbation_recovery_10pct_s"] = _settle_time(t[ok], dev[ok], tp, float(t[ok][-1]), 5 * tol)
     out["perturbation_recovery_definition"] = (
         f"time after t = {tp} s after which |Q_perturbed(t) − Q_unperturbed(t + time_shift)| stays below "
         f"{c['settle_fraction']:.0%} of max|Q| (time_shift: the phase shift oscillator 0 keeps, as any "
