@@ -28,6 +28,44 @@ def random_domain_id() -> int:
     return random.SystemRandom().randint(1, 101)
 
 
+def domain_is_quiet(domain_id: int, wait: float = 0.5) -> bool:
+    """True when no other ROS node shows up on ``domain_id`` (this host) within ``wait`` seconds: two
+    graphs on one domain would exchange messages (random ids in 1..101 do collide now and then when
+    several test runs share a machine)."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    saved = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    ctx = rclpy.Context()
+    try:
+        rclpy.init(context=ctx, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node("graph_domain_probe", context=ctx, start_parameter_services=False)
+        end = time.monotonic() + wait
+        others: list[str] = []
+        while time.monotonic() < end and not others:
+            time.sleep(0.05)
+            others = [n for n in node.get_node_names() if n != "graph_domain_probe"]
+        node.destroy_node()
+        return not others
+    finally:
+        rclpy.try_shutdown(context=ctx)
+        if saved is None:
+            os.environ.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
+        else:
+            os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = saved
+
+
+def quiet_domain_id(attempts: int = 5) -> int:
+    """A random domain in 1..101 on which no other node is seen (the last candidate after ``attempts``)."""
+    domain = random_domain_id()
+    for _ in range(attempts - 1):
+        if domain_is_quiet(domain):
+            return domain
+        domain = random_domain_id()
+    return domain
+
+
 def isolated_env(domain_id: int, base: dict | None = None) -> dict:
     """The environment of an isolated graph: its own domain, discovery on this host only."""
     env = dict(os.environ if base is None else base)
@@ -84,7 +122,7 @@ class Graph:
     def __init__(self, log_dir: str | Path, domain_id: int | None = None, use_sim_time: bool = True):
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        self.domain_id = random_domain_id() if domain_id is None else int(domain_id)
+        self.domain_id = quiet_domain_id() if domain_id is None else int(domain_id)
         self.env = isolated_env(self.domain_id)
         self.use_sim_time = use_sim_time
         self.procs: dict[str, NodeProcess] = {}

@@ -310,6 +310,7 @@ def _make_node():
                 f"pacing={self.pacing} control_period={self.period_ns / 1e9} s physics={self.sim.dt} s "
                 f"({self.steps_per_period} steps/period)")
             sched_origin = None
+            rtf_in_use = self.rtf_target
             while rclpy.ok():
                 t_ns = self.k * self.period_ns
                 self.publish_state(t_ns)
@@ -317,6 +318,9 @@ def _make_node():
                     if not self._wait_for_torque(t_ns):
                         break
                 elif realtime:
+                    if self.rtf_target != rtf_in_use:  # re-base the schedule on a factor change
+                        sched_origin = time.perf_counter() - self.k * self.period_ns / 1e9 / self.rtf_target
+                        rtf_in_use = self.rtf_target
                     deadline = sched_origin + (self.k + 1) * self.period_ns / 1e9 / self.rtf_target
                     self.hot.poll(0.0)
                     while True:
