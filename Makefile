@@ -15,8 +15,11 @@ $(STAMP): requirements.txt setup.py setup.cfg package.xml
 	@py=$$(tools/find_python312.sh) || exit 1; \
 	if [ ! -x $(PY) ]; then echo "setup: creating $(VENV) with $$py"; "$$py" -m venv $(VENV) || exit 1; fi
 	@tools/ensure_egl.sh
-	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt 2>&1 | grep -v "is ignored: it is neither" || true
-	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e . 2>&1 | grep -v "is ignored: it is neither" || true
+	@# pipefail keeps pip's exit status; the filter only hides a local pip index's noise
+	set -o pipefail; $(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt 2>&1 \
+	  | { grep -v "is ignored: it is neither" || true; }
+	set -o pipefail; $(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e . 2>&1 \
+	  | { grep -v "is ignored: it is neither" || true; }
 	@$(PY) -c "import rclpy, mujoco, numpy, cpg_walker" || { echo "setup: the environment is incomplete (see pip's output above)"; exit 1; }
 	@touch $(STAMP)
 
