@@ -61,6 +61,29 @@ def test_feedback_eqs_16_17_and_inter_cpg_eqs_12_13():
     assert out[4, 0, 0] == 0.0  # the root learns no phase
 
 
+def test_fixed_coupling_link_keeps_phase_offset():
+    """couple_cpgs(learn_phase=False): eq 12's term acts, eq 13 does not learn φ (it stays at the given
+    offset); the same link with learn_phase=True moves φ towards the actual phase difference."""
+    t = np.arange(0, 4.0, 0.002)
+    P = np.stack([np.sin(15 * t), np.sin(15 * t - 1.0)], axis=1)  # CPG 1 lags CPG 0 by 1 rad
+
+    def run(learn_phase: bool) -> tuple[CPGNetwork, np.ndarray]:
+        net = CPGNetwork(np.array([[14.5], [14.5]]))
+        net.couple_cpgs(child=1, parent=0, phase_offset=np.pi, learn_phase=learn_phase)
+        out = np.empty_like(net.state)
+        net.learning_rhs(net.state, np.zeros(2), out)
+        for k in range(len(t) - 1):
+            net.step(0.002, P[k])
+        return net, out
+
+    fixed, d_fixed = run(False)
+    learned, d_learned = run(True)
+    assert fixed.phi[1, 0] == np.pi  # exactly: not integrated at all
+    assert d_fixed[4, 1, 0] == 0.0 and d_learned[4, 1, 0] != 0.0
+    np.testing.assert_array_equal(d_fixed[:4], d_learned[:4])  # same eq 12 coupling term in ẋ
+    assert abs(np.angle(np.exp(1j * (learned.phi[1, 0] - np.pi)))) > 0.5
+
+
 def _learn_state(dt: float, T: float) -> np.ndarray:
     net = CPGNetwork(np.array([14.0, 29.0, 44.0, 58.0]))
     n = round(T / dt)

@@ -49,6 +49,8 @@ def test_learning_converges_to_recorded_gait(learned_n3):
     ratios = om[:, 1:] / om[:, :1]
     active = np.abs(ctrl.net.alpha[:, 1:]) > 0.05 * np.abs(ctrl.net.alpha).max(axis=1, keepdims=True)
     assert np.all(np.abs(ratios - np.round(ratios))[active] < 0.02)
+    # the Hip2 ↔ Hip2 link is fixed (not learned): φ is exactly π after learning
+    assert [ctrl.net.phi[i, 0] for i in HIP2_PAIR] == [math.pi, math.pi]
     # learned left-right phase: Hip2 fundamentals stay π apart; frozen free run matches the recording
     _, Q, P, measured = free_run_errors(ctrl, 3)
     rms = np.degrees(np.sqrt(np.mean((Q - P) ** 2, axis=0)))

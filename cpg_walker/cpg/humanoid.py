@@ -17,9 +17,9 @@ left, then the right leg), B = 10 CPGs of N oscillators each (the paper: N = 3):
   accumulate the phase errors of three links between them.
 * Between the legs: the two Hip2 main oscillators reference each other with φ = π (antisymmetric
   coupling). π is a design constant, not one of the 8 learned phases (the recording's Hip2 fundamentals
-  are π − 0.001 rad apart). The link is already present while learning (its φ, started at π, moves by
-  eq 13 by < 1e-3 rad) because a locked coupling term also enlarges the oscillator's radius, which α
-  must absorb; at freeze φ is reset to exactly π.
+  are π − 0.001 rad apart), so the link is fixed (``couple_cpgs(..., learn_phase=False)``: eq 12's
+  coupling term, no eq 13 learning; φ stays exactly π). The link is already present while learning
+  because a locked coupling term also enlarges the oscillator's radius, which α must absorb.
 
 Offsets: the recorded angles have a non-zero mean (the crouched walking posture) that zero-mean
 oscillators cannot learn. Each DOF's target is q*_k = offset_k + gain_k·Σ_i α_{k,i} x_{k,i}, where
@@ -210,10 +210,15 @@ class HumanoidCPG:
             net.couple_cpgs(child, parent, phase_offset=None)
         return net
 
-    def _install_leg_coupling(self) -> None:
+    @staticmethod
+    def couple_legs(net: CPGNetwork) -> None:
+        """The fixed antisymmetric Hip2 ↔ Hip2 link (eq 12 with φ = π; not learned by eq 13)."""
         a, b = HIP2_PAIR
-        self.net.couple_cpgs(a, b, phase_offset=LEG_PHASE)
-        self.net.couple_cpgs(b, a, phase_offset=LEG_PHASE)
+        net.couple_cpgs(a, b, phase_offset=LEG_PHASE, learn_phase=False)
+        net.couple_cpgs(b, a, phase_offset=LEG_PHASE, learn_phase=False)
+
+    def _install_leg_coupling(self) -> None:
+        self.couple_legs(self.net)
 
     @classmethod
     def learn(cls, gait: str = "walk", settings: HumanoidSettings | None = None,
@@ -241,10 +246,8 @@ class HumanoidCPG:
         net = cls.build_network(om0, p, c, offset, gain)
         # The Hip2–Hip2 link is present while learning too: a locked coupling term τ·sin θ = τ·x/r also
         # pushes the radius (r² -> μ + τ/2γ), so α must be learned with the coupling that plays it back.
-        # Its φ starts at π, evolves by eq 13 (ends within 1e-3 rad of π here) and is reset to π at freeze.
-        a, b = HIP2_PAIR
-        net.couple_cpgs(a, b, phase_offset=LEG_PHASE)
-        net.couple_cpgs(b, a, phase_offset=LEG_PHASE)
+        # It is fixed (learn_phase=False): its φ is π throughout, not learned by eq 13.
+        cls.couple_legs(net)
         fastest = float(om0.max()) * c / min(1.0, s.harmonic_seed_factor)  # rad/s
         dt_max = 2 * math.pi / (s.steps_per_fastest_period * fastest)
         dt_max = min(dt_max, 0.45 / (c * 2 * p.gamma * p.mu))

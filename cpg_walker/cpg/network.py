@@ -37,8 +37,9 @@ Eqs 4/8 and 12/13 are one mechanism: every oscillator has at most one *reference
 oscillator of any CPG) and a coupling strength; its target phase is Θ = ρ·θ_ref − φ with ρ = ω/ω_ref
 (eq 8, inside a CPG) or ρ = 1 (eq 13, between CPGs). By default oscillator i ≥ 1 of CPG b references
 oscillator 0 of CPG b with strength τ; `couple_cpgs` adds the eq 12–13 links between main oscillators
-(a chain, or two main oscillators referencing each other for the legs' antisymmetric coupling). φ of an
-oscillator without reference is unused, so φ_{b,0} is the eq 13 state "φ_{0,k}" of CPG b.
+(a chain, or two main oscillators referencing each other for the legs' antisymmetric coupling); a link
+made with `learn_phase=False` is fixed: eq 12's coupling term acts, eq 13 does not (φ stays as given).
+φ of an oscillator without reference is unused, so φ_{b,0} is the eq 13 state "φ_{0,k}" of CPG b.
 
 Learning vs playback: while `learning` is True all five variables evolve (eqs 4–11). `freeze()` sets
 F = 0 and stops ω, α, φ (the paper's "set F(t) = 0"; φ is frozen too so a perturbation cannot be
@@ -234,14 +235,21 @@ class CPGNetwork:
 
     # ---------------------------------------------------------------- coupling hooks (eqs 12–13)
     def couple_cpgs(
-        self, child: int, parent: int, strength: float | None = None, phase_offset: float | None = None
+        self,
+        child: int,
+        parent: int,
+        strength: float | None = None,
+        phase_offset: float | None = None,
+        learn_phase: bool = True,
     ) -> None:
         """Couple main oscillator (child, 0) to main oscillator (parent, 0) (eqs 12–13).
 
         Adds τ'·sin(θ_{parent,0} − φ_{child,0}) to ẋ_{child,0} (τ' = `strength`, default τ) and, while
-        learning, φ̇_{child,0} = sin(θ_{parent,0} − θ_{child,0} − φ_{child,0}). `phase_offset` sets
-        φ_{child,0} (e.g. π for the legs' antisymmetric coupling). For two oscillators referencing each
-        other, call it both ways."""
+        learning and if `learn_phase`, φ̇_{child,0} = sin(θ_{parent,0} − θ_{child,0} − φ_{child,0})
+        (eq 13). With `learn_phase=False` the link is fixed: φ_{child,0} stays at `phase_offset` (eq 12
+        only; e.g. π for the legs' antisymmetric coupling, a design constant). `phase_offset` sets
+        φ_{child,0} (None keeps the current value). For two oscillators referencing each other, call it
+        both ways."""
         for name, value in (("child", child), ("parent", parent)):
             if not 0 <= value < self.B:
                 raise ValueError(f"{name} CPG index {value} out of range 0..{self.B - 1}")
@@ -253,7 +261,7 @@ class CPGNetwork:
         self._ref[child, 0] = parent * self.N
         self._ref_omega[child, 0] = child * self.N  # ρ = 1
         self._k[child, 0] = k
-        self._learn_phi[child, 0] = 1.0 if k > 0 else 0.0
+        self._learn_phi[child, 0] = 1.0 if k > 0 and learn_phase else 0.0
         if phase_offset is not None:
             self._s[4, child, 0] = float(phase_offset)
         if not self.learning:
