@@ -6,7 +6,7 @@ process group, on an isolated DDS domain, with parameters; stopped with SIGINT, 
         g.start("pid_node", lockstep=True)
         g.wait("sim_node", timeout=60)
 
-Used by ``cpg-walker replay --graph``, the benchmark and the multi-process tests.
+Used by ``cpg-walker replay --graph``, ``cpg-walker walk``, the benchmark and the multi-process tests.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-NODES = ("sim_node", "pid_node", "target_player_node")
+NODES = ("sim_node", "pid_node", "target_player_node", "cpg_node")
 
 
 def random_domain_id() -> int:

@@ -1,70 +1,34 @@
 """cpg_node through real processes over DDS: parameter validation through the parameter service, the
-/joint_targets, /cpg/state and /diagnostics it publishes, and a short lockstep walk through the three-node
-graph. Each test on its own random domain (1..101), localhost discovery; every process stopped by the
-fixture even on failure."""
+/joint_targets, /cpg/state and /diagnostics it publishes, the 60 s lockstep walk through the three-node
+graph (deterministic), and runtime zeta/alpha changes through the parameter service changing the gait.
+Each test on its own random domain (1..101), localhost discovery; every process stopped by the fixtures
+(conftest.py) even on failure."""
 
 from __future__ import annotations
 
+import json
 import math
 
+import numpy as np
 import pytest
+from ros_helpers import double, string
 
 from cpg_walker.cpg.humanoid import DOFS
-from cpg_walker.experiments.walk_graph import WalkGraph
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
-@pytest.fixture
-def graph(tmp_path, monkeypatch):
-    g = WalkGraph(tmp_path / "logs")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(g.domain_id))
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
-    yield g
-    g.stop_all(timeout=5.0)
-    for proc in g.procs.values():
-        assert proc.popen.poll() is not None, f"{proc.name} survived the teardown"
-
-
-@pytest.fixture
-def probe(graph):
-    from test_ros_graph import Probe
-
-    p = Probe(graph.domain_id)
-    yield p
-    p.close()
-
-
 def test_modulation_parameters_validated_through_the_service(graph, probe):
-    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-    from rcl_interfaces.srv import GetParameters, SetParameters
-
     graph.start("cpg_node")
-    client = probe.node.create_client(SetParameters, "/cpg/set_parameters")
-    assert client.wait_for_service(timeout_sec=30.0), graph.procs["cpg_node"].log()
-
-    def set_param(name: str, value: ParameterValue):
-        future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
-        assert probe.spin_for(10.0, until=future.done)
-        return future.result().results[0]
-
-    def double(x: float) -> ParameterValue:
-        return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=x)
-
     for name, bad in (("zeta", math.nan), ("alpha", math.nan), ("zeta", 2.5), ("zeta", -3.0),
                       ("alpha", -0.1), ("alpha", 2.01)):
-        result = set_param(name, double(bad))
+        result = probe.set_param("cpg", name, double(bad), timeout=30.0)
         assert not result.successful and name in result.reason, (name, bad, result.reason)
-    wrong = set_param("zeta", ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="fast"))
+    wrong = probe.set_param("cpg", "zeta", string("fast"))
     assert not wrong.successful and wrong.reason
-    assert set_param("zeta", double(0.8)).successful
-    assert set_param("alpha", double(1.2)).successful
-    get = probe.node.create_client(GetParameters, "/cpg/get_parameters")
-    assert get.wait_for_service(timeout_sec=10.0)
-    future = get.call_async(GetParameters.Request(names=["zeta", "alpha"]))
-    assert probe.spin_for(10.0, until=future.done)
-    assert [v.double_value for v in future.result().values] == [0.8, 1.2]
+    assert probe.set_param("cpg", "zeta", double(0.8)).successful
+    assert probe.set_param("cpg", "alpha", double(1.2)).successful
+    assert [v.double_value for v in probe.get_params("cpg", ["zeta", "alpha"])] == [0.8, 1.2]
     assert "commanded zeta=0.8" in graph.procs["cpg_node"].log()
 
 
@@ -108,11 +72,92 @@ def test_targets_state_and_diagnostics_published(graph, probe):
     assert int(values["n_oscillators"]) == sizes[1] - 1
 
 
-def test_short_lockstep_walk_through_the_graph(tmp_path):
+def test_60s_lockstep_walk_is_deterministic(tmp_path):
+    """60 s through sim_node + pid_node + cpg_node without a fall; a second, 20 s run reproduces the
+    first 20 s of it bit for bit (lockstep: every period's inputs are fixed by the stamps)."""
     from cpg_walker.experiments.walk_graph import run_graph_walk
 
-    report = run_graph_walk(tmp_path / "walk", duration=15.0)
-    assert not report["fell"], report
-    assert report["distance_m"] > 0.5, report  # the opening steps, then ~8 s of CPG walking
+    report = run_graph_walk(tmp_path / "walk60", duration=60.0)
+    assert not report["fell"] and report["duration_s"] == pytest.approx(60.0, abs=0.02), report
+    assert report["distance_m"] > 3.0, report  # 4.96 m measured; the recording's pace is ~0.075 m/s
+    assert report["steps"] >= 40, report  # ~2 steps per 2.51 s stride
     assert report["zeta"] == 1.0 and report["feedback"] is False
-    assert (tmp_path / "walk" / "walk.json").exists()
+    assert report["graph"]["torque_age_s"]["max"] == 0.0  # every period used its own command
+    assert (tmp_path / "walk60" / "walk.json").exists()
+    run_graph_walk(tmp_path / "walk20", duration=20.0)
+    long, short = (json.loads((tmp_path / d / "graph_record.json").read_text()) for d in ("walk60", "walk20"))
+    n = len(short["t"])
+    assert n >= 2000 and short["t"] == long["t"][:n]
+    np.testing.assert_array_equal(np.array(short["q"]), np.array(long["q"][:n]))  # bit-identical
+    np.testing.assert_array_equal(np.array(short["base_xy"]), np.array(long["base_xy"][:n]))
+
+
+def _diag(msg) -> tuple[float, dict] | None:
+    """(stamp s, values) of a cpg_walker/cpg status in a DiagnosticArray, else None."""
+    for s in msg.status:
+        if s.name == "cpg_walker/cpg":
+            t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+            return t, {kv.key: kv.value for kv in s.values}
+    return None
+
+
+def test_runtime_zeta_and_alpha_change_the_gait(graph, probe, tmp_path):
+    """zeta = 0.8 set through the parameter service mid-walk slows the stepping to the learned stride
+    period / 0.8 (foot touchdowns in the sim's record, oscillator frequencies on /cpg/state); alpha = 0
+    then collapses the CPG's oscillation: its joint targets settle on the offsets and the stepping stops."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import Float64MultiArray
+
+    from cpg_walker.cpg.humanoid import HumanoidCPG
+    from cpg_walker.experiments.replay_graph import record_to_result
+    from cpg_walker.nodes.sim_core import RunRecord
+    from cpg_walker.paths import config_path
+
+    period = HumanoidCPG.load(config_path("cpg_humanoid.yaml")).period  # learned stride period (2.513 s)
+    t_zeta, t_alpha, duration = 7.0, 22.0, 27.0  # sim s; the CPG has taken over at 6.6 s
+    probe.listen("/cpg/state", Float64MultiArray, 500)
+    probe.listen("/diagnostics", DiagnosticArray, 500)
+    record = tmp_path / "record.json"
+    graph.start("pid_node", lockstep=True, wait_for_targets=True)
+    graph.start("cpg_node")
+    assert probe.spin_for(30.0, until=lambda: probe.node.count_publishers("/cpg/state") > 0)
+    graph.start("sim_node", pacing="lockstep", duration=duration, record_path=str(record))
+    diags = lambda: [d for _, m in probe.received["/diagnostics"] if (d := _diag(m))]  # noqa: E731
+    state = probe.received["/cpg/state"]
+
+    def state_now() -> np.ndarray:
+        m = state[-1][1]
+        return np.array(m.data).reshape([d.size for d in m.layout.dim])
+
+    reached = lambda t: bool(diags()) and diags()[-1][0] >= t  # noqa: E731
+    assert probe.spin_for(60.0, until=lambda: reached(t_zeta)), graph.procs["cpg_node"].log()
+    before = state_now()  # ζ = 1, α = 1: CPG walking
+    assert probe.set_param("cpg", "zeta", 0.8).successful
+    assert probe.spin_for(60.0, until=lambda: reached(t_alpha))
+    slowed = state_now()
+    assert probe.set_param("cpg", "alpha", 0.0).successful
+    assert graph.wait("sim_node", 120) == 0
+    probe.spin_for(1.0)
+    end = state_now()
+    n = end.shape[1] - 1
+    # /cpg/state: every oscillator's frequency scaled by 0.8, the fundamental is 1 / stride period
+    np.testing.assert_allclose(slowed[:, :n, 1] / before[:, :n, 1], 0.8, rtol=1e-3)
+    # the lowest learned ω is the stride frequency (intrinsic ω: 0.3974 Hz vs 1 / 2.513 s = 0.3979 Hz)
+    assert before[:, :n, 1].min() == pytest.approx(1.0 / period, rel=5e-3)
+    # the sim's foot touchdowns: one per foot every period / 0.8 once the ζ filter has settled
+    run = record_to_result(RunRecord.load(record))
+    assert not run.fell
+    applied = min(t for t, v in diags() if v["zeta_command"] == "0.8")  # command in effect (± 0.1 s)
+    for foot, times in run.touchdowns.items():
+        t = np.array(times)
+        intervals = np.diff(t[(t > applied + 2.5) & (t < t_alpha)])
+        assert len(intervals) >= 2, (foot, times)
+        np.testing.assert_allclose(intervals, period / 0.8, rtol=0.03, err_msg=f"{foot}: {times}")
+        assert not any(t > t_alpha + 3.0), (foot, times)  # α = 0: no more steps
+    # α = 0: oscillator amplitudes and the targets' oscillating part gone, targets on the offsets
+    amp_before = before[:, :n, 2].max()
+    assert amp_before > 0.05 and end[:, :n, 2].max() < 1e-3 * amp_before
+    swing_before = np.abs(before[:, n, 0] - before[:, n, 2]).max()
+    assert swing_before > 0.05
+    np.testing.assert_allclose(end[:, n, 0], end[:, n, 2], atol=1e-3 * swing_before)
+    assert np.abs(end[:, n, 1]).max() < 1e-3  # target velocities ~ 0

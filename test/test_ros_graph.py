@@ -1,6 +1,6 @@
 """Multi-process tests of the ROS graph: real node processes over real DDS, each test on its own random
 domain (1..101) with localhost-only discovery; every process is stopped (SIGINT, then SIGKILL) by the
-fixture's teardown even when the test fails."""
+fixture's teardown even when the test fails (fixtures ``graph``, ``probe``: conftest.py)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 import pytest
+from ros_helpers import Probe, double, string
 
 from cpg_walker.graph import Graph
 from cpg_walker.robot.joints import JOINT_NAMES
@@ -19,69 +20,6 @@ from cpg_walker.robot.joints import JOINT_NAMES
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 HEAD = JOINT_NAMES.index("head_joint_1")
-
-
-@pytest.fixture
-def graph(tmp_path, monkeypatch):
-    g = Graph(tmp_path / "logs")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(g.domain_id))
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
-    yield g
-    g.stop_all(timeout=5.0)
-    for proc in g.procs.values():
-        assert proc.popen.poll() is not None, f"{proc.name} survived the teardown"
-
-
-class Probe:
-    """An rclpy node in the test process, on the graph's domain, that records what it receives."""
-
-    def __init__(self, domain_id: int):
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
-
-        self.ctx = rclpy.Context()
-        rclpy.init(context=self.ctx, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("probe", context=self.ctx)
-        self.executor = SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
-        self.received: dict[str, list] = {}
-
-    def listen(self, topic: str, msg_type, qos=50) -> None:
-        self.received[topic] = []
-        self.node.create_subscription(msg_type, topic, lambda m: self.received[topic].append(
-            (time.monotonic(), m)), qos)
-
-    def spin_for(self, seconds: float, until=None) -> bool:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.01)
-            if until is not None and until():
-                return True
-        return until is None
-
-    def call(self, srv_type, name: str, timeout: float = 10.0):
-        client = self.node.create_client(srv_type, name)
-        assert client.wait_for_service(timeout_sec=timeout), f"service {name} not available"
-        future = client.call_async(srv_type.Request())
-        self.spin_for(timeout, until=future.done)
-        assert future.done(), f"no answer from {name}"
-        return future.result()
-
-    def close(self) -> None:
-        import rclpy
-
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.ctx)
-
-
-@pytest.fixture
-def probe(graph):
-    p = Probe(graph.domain_id)
-    yield p
-    p.close()
 
 
 def _wait_matched(probe: Probe, *publishers, timeout: float = 20.0) -> None:
@@ -263,32 +201,14 @@ def test_replay_through_the_graph_walks(tmp_path):
 
 
 def test_pid_gains_are_runtime_parameters_and_validated(graph, probe):
-    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-    from rcl_interfaces.srv import GetParameters, SetParameters
-
     graph.start("pid_node")
-    client = probe.node.create_client(SetParameters, "/pid/set_parameters")
-    assert client.wait_for_service(timeout_sec=20.0), graph.procs["pid_node"].log()
-
-    def set_param(name: str, value: ParameterValue):
-        future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
-        assert probe.spin_for(10.0, until=future.done)
-        return future.result().results[0]
-
-    def double(x: float) -> ParameterValue:
-        return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=x)
-
     for bad in (math.nan, -1.0, 1e9):
-        result = set_param("kp.leg", double(bad))
+        result = probe.set_param("pid", "kp.leg", double(bad))
         assert not result.successful and result.reason, bad
-    wrong_type = set_param("kd.arm", ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="x"))
+    wrong_type = probe.set_param("pid", "kd.arm", string("x"))
     assert not wrong_type.successful
-    assert set_param("kp.leg", double(120.0)).successful
-    get = probe.node.create_client(GetParameters, "/pid/get_parameters")
-    assert get.wait_for_service(timeout_sec=10.0)
-    future = get.call_async(GetParameters.Request(names=["kp.leg", "target_timeout"]))
-    assert probe.spin_for(10.0, until=future.done)
-    values = future.result().values
+    assert probe.set_param("pid", "kp.leg", double(120.0)).successful
+    values = probe.get_params("pid", ["kp.leg", "target_timeout"])
     assert values[0].double_value == 120.0 and values[1].double_value == pytest.approx(0.1)
     # the harness sees this graph on its domain, so another graph would not pick it
     from cpg_walker.graph import domain_is_quiet

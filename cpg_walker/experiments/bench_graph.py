@@ -2,7 +2,10 @@
 
 Measures, each in its own isolated DDS domain with real node processes:
   * real-time factor of sim_node + pid_node (standing, 500 Hz control, 1 kHz physics) in each pacing;
-  * the walk through the three-process graph (with target_player_node) in lockstep;
+  * the walk through the three-process graph (with target_player_node) in lockstep and real time;
+  * the CPG walk (with cpg_node) in real time and lockstep, and cpg_node's loop timing at its rate: wall
+    period between consecutive /clock ticks, its jitter against the nominal 2 ms period (meaningful in
+    real time), work per tick, overruns (from the node's stats at exit, runtime.TickStats);
   * the stretch goal: lockstep at a 1 ms control period (1 kHz);
   * latency from publishing a /joint_states sample to the sim taking the torque that answers it (p50/p99,
     measured inside the sim process on one monotonic clock);
@@ -28,37 +31,32 @@ def _node_stats(log: str) -> dict:
     return json.loads(m[-1]) if m else {}
 
 
-def graph_run(pacing: str, duration: float, player: bool = False, control_period: float = 0.002,
+def graph_run(pacing: str, duration: float, target: str | None = None, control_period: float = 0.002,
               work: Path | None = None) -> dict:
-    """One run of the graph; the sim exits after ``duration`` sim seconds."""
-    from cpg_walker.graph import Graph
-    from cpg_walker.nodes.sim_core import RunRecord
+    """One run of the graph (sim + PID, with ``target`` node if given); the sim exits after ``duration``
+    sim seconds. With cpg_node, ``cpg_tick`` is its loop timing (wall period between consecutive /clock
+    ticks vs the nominal control period, work per tick, overruns) from its stats at exit."""
+    from cpg_walker.experiments.replay_graph import run_graph
 
     work = Path(tempfile.mkdtemp(prefix="bench_graph_")) if work is None else work
-    tag = f"{pacing}_{'walk' if player else 'stand'}_{round(control_period * 1e6)}us"
-    record_path = work / f"{tag}.json"
-    with Graph(work / tag) as g:
-        g.start("pid_node", lockstep=pacing == "lockstep", wait_for_targets=player)
-        if player:
-            g.start("target_player_node")
-        g.start("sim_node", pacing=pacing, duration=float(duration), control_period=float(control_period),
-                record_path=str(record_path))
-        g.wait("sim_node", timeout=60 + 20 * duration)
-        g.stop_all()
-        logs = {name: p.log() for name, p in g.procs.items()}
-    rec = RunRecord.load(record_path)
-    s = rec.stats
+    tag = f"{pacing}_{target or 'stand'}_{round(control_period * 1e6)}us"
+    run = run_graph(work, target, duration=duration, pacing=pacing, control_period=control_period,
+                    timeout=60 + 20 * duration, tag=tag)
+    rec, s = run.record, run.record.stats
     cpu = {"sim_node": round(s["cpu_s"] / s["wall_s"], 3) if s["wall_s"] else None}
-    for name in ("pid_node", "target_player_node"):
-        if name in logs:
-            cpu[name] = _node_stats(logs[name]).get("cpu_fraction")
-    return {
+    node_stats = {name: _node_stats(log) for name, log in run.logs.items() if name != "sim_node"}
+    for name, stats in node_stats.items():
+        cpu[name] = stats.get("cpu_fraction")
+    out = {
         "real_time_factor": s["real_time_factor"], "sim_s": s["sim_s"], "wall_s": s["wall_s"],
         "control_hz": round(1.0 / control_period), "latency_ms": s["latency"],
         "late_commands": s["late_commands"], "torque_age_mean_ms": round(s["torque_age_s"]["mean"] * 1e3, 3),
         "cpu_core_fraction": cpu, "fell": rec.fell,
         "distance_m": round(float(rec.base_xy[-1][0] - rec.base_xy[0][0]), 4) if rec.base_xy else None,
     }
+    if target == "cpg_node":
+        out["cpg_tick"] = node_stats["cpg_node"].get("tick", {})
+    return out
 
 
 def inprocess_baseline(duration: float) -> dict:
@@ -123,23 +121,30 @@ def per_period_costs(n: int = 1000) -> dict:
 
 def run(quick: bool = False) -> dict:
     d = 3.0 if quick else 10.0
+    d_cpg = 10.0 if quick else 20.0
     work = Path(tempfile.mkdtemp(prefix="bench_graph_"))
     result: dict = {
         "setup": {"physics_dt_s": 0.001, "control_period_s": 0.002, "sim_s_per_run": d,
+                  "sim_s_per_cpg_run": d_cpg,
                   "note": "sim_node + pid_node standing unless stated; each run in its own DDS domain"},
         "baseline_inprocess": inprocess_baseline(d),
         "per_period_costs": per_period_costs(300 if quick else 1000),
     }
     for pacing in ("realtime", "fast", "lockstep"):
         result[pacing] = graph_run(pacing, d, work=work)
-    result["lockstep_walk_3_nodes"] = graph_run("lockstep", d, player=True, work=work)
-    result["realtime_walk_3_nodes"] = graph_run("realtime", d, player=True, work=work)
+    result["lockstep_walk_3_nodes"] = graph_run("lockstep", d, "target_player_node", work=work)
+    result["realtime_walk_3_nodes"] = graph_run("realtime", d, "target_player_node", work=work)
     result["lockstep_1khz"] = graph_run("lockstep", d, control_period=0.001, work=work)
+    # cpg_node's loop at its rate: the CPG takes over at 6.6 s (recorded opening steps before)
+    result["realtime_cpg_walk"] = graph_run("realtime", d_cpg, "cpg_node", work=work)
+    result["lockstep_cpg_walk"] = graph_run("lockstep", d_cpg, "cpg_node", work=work)
     result["summary"] = {
         "real_time_factor": {k: result[k]["real_time_factor"] for k in
                              ("realtime", "fast", "lockstep", "lockstep_walk_3_nodes", "lockstep_1khz")},
         "latency_p50_ms": result["lockstep"]["latency_ms"].get("p50_ms"),
         "latency_p99_ms": result["lockstep"]["latency_ms"].get("p99_ms"),
+        "cpg_node_realtime_jitter_ms": result["realtime_cpg_walk"]["cpg_tick"].get("jitter_ms"),
+        "cpg_node_realtime_work_ms": result["realtime_cpg_walk"]["cpg_tick"].get("work_ms"),
     }
     return result
 

@@ -160,6 +160,27 @@ def summarize(r: ReplayResult, start_xy: np.ndarray | None = None, period_s: flo
     return m
 
 
+def recording_setup(gait: str = "walk", data: str | None = None, duration: float | None = None,
+                    need_cycle: bool = True):
+    """The recording (``data`` CSV, else the packaged ``gait``), the run's duration (default: the
+    recording, at least 30 s) and its steady cycle. Without a steady cycle the recording plays once (a
+    cycle longer than it); with ``need_cycle`` that is an error when ``duration`` runs past its end."""
+    from cpg_walker.robot.gait_data import Cycle, find_steady_cycle, load_gait
+
+    recording = load_gait(data if data is not None else gait)
+    if duration is None:
+        duration = max(30.0, recording.duration)
+    if not (duration > 0):
+        raise ValueError(f"--duration must be positive, got {duration}")
+    try:
+        cycle = find_steady_cycle(recording)
+    except ValueError as exc:
+        if need_cycle and duration > recording.duration:
+            raise ValueError(f"cannot continue past the recording's end: {exc}") from None
+        cycle = Cycle(start=0.0, period=recording.duration + 1.0, mismatch_rad=float("nan"))
+    return recording, duration, cycle
+
+
 def replay_recording(
     out_dir: str,
     gait: str = "walk",
@@ -174,20 +195,10 @@ def replay_recording(
     from pathlib import Path
 
     from cpg_walker.cli.progress import Progress
-    from cpg_walker.robot.gait_data import Cycle, GaitPlayback, find_steady_cycle, load_gait
+    from cpg_walker.robot.gait_data import GaitPlayback
     from cpg_walker.robot.pid import load_pid_config
 
-    recording = load_gait(data if data is not None else gait)
-    if duration is None:
-        duration = max(30.0, recording.duration)
-    if not (duration > 0):
-        raise ValueError(f"--duration must be positive, got {duration}")
-    try:
-        cycle = find_steady_cycle(recording)
-    except ValueError as exc:
-        if duration > recording.duration:
-            raise ValueError(f"cannot continue past the recording's end: {exc}") from None
-        cycle = Cycle(start=0.0, period=recording.duration + 1.0, mismatch_rad=float("nan"))
+    recording, duration, cycle = recording_setup(gait, data, duration)
     source = GaitPlayback(recording, cycle=cycle)
     pid_cfg = load_pid_config()
     sim = Hoap2Sim()

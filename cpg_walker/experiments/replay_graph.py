@@ -5,15 +5,22 @@ over /joint_states -> /joint_torques, sim_node steps the HOAP-2 and records the 
 sole loads every 10 ms of sim time). The record is summarised by the in-process replay's code
 (experiments/replay.py), so replay.json has the same keys, plus ``real_time_factor`` and a ``graph``
 section (pacing, latency, CPU per node).
+
+``run_graph`` / ``GraphRun.report`` are the shared part: start sim_node + pid_node + a target node with
+its parameters, wait for the sim to finish, summarise its record. ``cpg-walker walk``
+(experiments/walk_graph.py) and the benchmark use them too.
 """
 
 from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+PACINGS = ("realtime", "fast", "lockstep")
 
 
 def record_to_result(record, touchdown_from_loads: bool = True):
@@ -35,6 +42,92 @@ def record_to_result(record, touchdown_from_loads: bool = True):
     )
 
 
+@dataclass
+class GraphRun:
+    """One finished run of the graph: the sim's record, wall time, CPU seconds and log of every node."""
+
+    record: object  # nodes.sim_core.RunRecord
+    target: str | None
+    pacing: str
+    control_period: float
+    wall_s: float
+    cpu_s: dict[str, float | None]
+    logs: dict[str, str]
+
+    def report(self, period_s: float | None) -> tuple[dict, object]:
+        """replay.json's keys (``summarize`` of the record, stride ``period_s``), ``real_time_factor``,
+        touchdowns, control, mass and the ``graph`` section; and the ReplayResult."""
+        from cpg_walker.experiments.replay import summarize
+        from cpg_walker.robot.hoap2 import Hoap2Sim
+
+        result = record_to_result(self.record)
+        stats = self.record.stats
+        sim = Hoap2Sim()
+        cpu = {**self.cpu_s, "sim_node": stats.get("cpu_s")}
+        report = {
+            **summarize(result, period_s=period_s),
+            "real_time_factor": stats["real_time_factor"],
+            "touchdowns_s": {k: [round(x, 3) for x in v] for k, v in result.touchdowns.items()},
+            "control": {"rate_hz": 1.0 / self.control_period, "delay_s": 0.0, "timestep_s": sim.dt,
+                        "through": f"ROS graph (sim_node, pid_node, {self.target})"},
+            "total_mass_kg": round(sim.total_mass, 4),
+            "graph": {
+                "pacing": self.pacing, "wall_s_total": round(self.wall_s, 2), "sim_wall_s": stats["wall_s"],
+                "latency_state_to_torque": stats["latency"], "late_commands": stats["late_commands"],
+                "resends": stats["resends"], "torque_age_s": stats["torque_age_s"],
+                "cpu_s": {k: (None if v is None or v != v else round(v, 3)) for k, v in cpu.items()},
+            },
+        }
+        return report, result
+
+
+def run_graph(
+    work_dir: str | Path,
+    target: str | None,
+    target_params: dict | None = None,
+    *,
+    duration: float,
+    pacing: str = "lockstep",
+    control_period: float = 0.002,
+    stop_on_fall: bool = True,
+    timeout: float,
+    pid_params: dict | None = None,
+    tag: str = "graph",
+) -> GraphRun:
+    """Run sim_node + pid_node (+ ``target`` node with ``target_params``) for ``duration`` sim seconds.
+
+    The sim records the run to ``work_dir/<tag>_record.json``; node logs go to ``work_dir/<tag>_logs``.
+    pid_node answers in lockstep when the sim does and waits for targets when there is a target node
+    (``pid_params`` override). Raises RuntimeError (with the sim's log tail) if the sim fails."""
+    from cpg_walker.graph import Graph
+    from cpg_walker.nodes.sim_core import RunRecord
+
+    if pacing not in PACINGS:
+        raise ValueError(f"pacing must be realtime, fast or lockstep, got {pacing!r}")
+    work = Path(work_dir)
+    work.mkdir(parents=True, exist_ok=True)
+    record_path = work / f"{tag}_record.json"
+    record_path.unlink(missing_ok=True)
+    started = time.monotonic()
+    with Graph(work / f"{tag}_logs") as g:
+        g.start("pid_node", **{"lockstep": pacing == "lockstep", "wait_for_targets": target is not None,
+                               **(pid_params or {})})
+        if target is not None:
+            g.start(target, **(target_params or {}))
+        g.start("sim_node", pacing=pacing, control_period=float(control_period), duration=float(duration),
+                stop_on_fall=stop_on_fall, record_path=str(record_path))
+        status = g.wait("sim_node", timeout)
+        cpu = {name: p.cpu_seconds() for name, p in g.procs.items() if name != "sim_node"}
+        g.stop_all()
+        logs = {name: p.log() for name, p in g.procs.items()}
+    wall = time.monotonic() - started
+    if status != 0 or not record_path.exists():
+        raise RuntimeError(f"sim_node exited with status {status}; logs in {work / f'{tag}_logs'}; tail:\n"
+                           f"{logs['sim_node'][-2000:]}")
+    return GraphRun(record=RunRecord.load(record_path), target=target, pacing=pacing,
+                    control_period=control_period, wall_s=wall, cpu_s=cpu, logs=logs)
+
+
 def run_graph_replay(
     out_dir: str | Path,
     gait: str = "walk",
@@ -46,66 +139,24 @@ def run_graph_replay(
     timeout: float | None = None,
 ) -> dict:
     """Replay a recording through sim_node + pid_node + target_player_node; write ``replay.json``."""
-    from cpg_walker.experiments.replay import summarize
-    from cpg_walker.graph import Graph
-    from cpg_walker.nodes.sim_core import RunRecord
-    from cpg_walker.robot.gait_data import Cycle, find_steady_cycle, load_gait
-    from cpg_walker.robot.hoap2 import Hoap2Sim
+    from cpg_walker.experiments.replay import recording_setup
 
-    if pacing not in ("realtime", "fast", "lockstep"):
+    if pacing not in PACINGS:
         raise ValueError(f"pacing must be realtime, fast or lockstep, got {pacing!r}")
-    recording = load_gait(data if data is not None else gait)
-    if duration is None:
-        duration = max(30.0, recording.duration)
-    if not (duration > 0):
-        raise ValueError(f"--duration must be positive, got {duration}")
-    try:
-        cycle = find_steady_cycle(recording)
-    except ValueError:
-        cycle = Cycle(start=0.0, period=recording.duration + 1.0, mismatch_rad=float("nan"))
+    recording, duration, cycle = recording_setup(gait, data, duration, need_cycle=False)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    record_path = out / "graph_record.json"
-    record_path.unlink(missing_ok=True)
-    lockstep = pacing == "lockstep"
-    started = time.monotonic()
-    with Graph(out / "graph_logs") as g:
-        g.start("pid_node", lockstep=lockstep, wait_for_targets=True)
-        g.start("target_player_node", **({"data": str(data)} if data else {"gait": gait}))
-        g.start("sim_node", pacing=pacing, control_period=float(control_period), duration=float(duration),
-                stop_on_fall=stop_on_fall, record_path=str(record_path))
-        limit = timeout if timeout is not None else 60.0 + duration * 5.0
-        status = g.wait("sim_node", limit)
-        cpu = {name: p.cpu_seconds() for name, p in g.procs.items() if name != "sim_node"}
-        g.stop_all()
-    wall = time.monotonic() - started
-    if status != 0 or not record_path.exists():
-        raise RuntimeError(f"sim_node exited with status {status}; log:\n"
-                           f"{(out / 'graph_logs' / 'sim_node.log').read_text()[-2000:]}")
-    record = RunRecord.load(record_path)
-    result = record_to_result(record)
-    metrics = summarize(result, period_s=cycle.period)
-    stats = record.stats
-    cpu["sim_node"] = stats.get("cpu_s")
-    sim = Hoap2Sim()
+    run = run_graph(out, "target_player_node", {"data": str(data)} if data else {"gait": gait},
+                    duration=duration, pacing=pacing, control_period=control_period,
+                    stop_on_fall=stop_on_fall,
+                    timeout=timeout if timeout is not None else 60.0 + duration * 5.0)
+    metrics, _ = run.report(period_s=cycle.period)
     report = {
         **metrics,
-        "real_time_factor": stats["real_time_factor"],
         "gait": recording.name,
         "data": recording.source,
         "recording_s": recording.duration,
         "cycle": {"start_s": round(cycle.start, 3), "period_s": round(cycle.period, 3),
                   "seam_mismatch_rad": round(cycle.mismatch_rad, 6)},
-        "touchdowns_s": {k: [round(x, 3) for x in v] for k, v in result.touchdowns.items()},
-        "control": {"rate_hz": 1.0 / control_period, "delay_s": 0.0, "timestep_s": sim.dt,
-                    "through": "ROS graph (sim_node, pid_node, target_player_node)"},
-        "total_mass_kg": round(sim.total_mass, 4),
-        "graph": {
-            "pacing": pacing, "wall_s_total": round(wall, 2), "sim_wall_s": stats["wall_s"],
-            "latency_state_to_torque": stats["latency"], "late_commands": stats["late_commands"],
-            "resends": stats["resends"], "torque_age_s": stats["torque_age_s"],
-            "cpu_s": {k: (None if v is None or v != v else round(v, 3)) for k, v in cpu.items()},
-        },
     }
     (out / "replay.json").write_text(json.dumps(report, indent=2) + "\n")
     return report

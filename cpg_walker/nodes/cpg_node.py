@@ -68,6 +68,8 @@ def state_vector(ctrl):
 
 
 def _make_node():
+    from time import perf_counter
+
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from rcl_interfaces.msg import SetParametersResult
     from rclpy.node import Node
@@ -77,7 +79,7 @@ def _make_node():
 
     from cpg_walker.cpg.humanoid import CPGGaitSource, HumanoidCPG
     from cpg_walker.nodes.messages import JointStateBuilder, darray, stamp
-    from cpg_walker.nodes.runtime import ActivityStats, HotPath, exit_log
+    from cpg_walker.nodes.runtime import ActivityStats, HotPath, TickStats, exit_log
     from cpg_walker.nodes.validation import to_ns
 
     class CPGNode(Node):
@@ -104,7 +106,7 @@ def _make_node():
             self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
             self.state_pub = self.create_publisher(Float64MultiArray, "/cpg/state", 10)
             self.pub = self.create_publisher(JointState, "/joint_targets", 10)
-            self.overruns = 0
+            self.timing = TickStats()
             self.phase = "learning"
             self.ctrl, self.origin, self.converged = self._controller(g("cpg_file").value,
                                                                       g("n_oscillators").value)
@@ -175,9 +177,7 @@ def _make_node():
 
         # ---------------------------------------------------------------- clock
         def _on_clock(self, msg: Clock) -> None:
-            import time
-
-            w0 = time.perf_counter()
+            w0 = perf_counter()
             self.activity.tick()
             t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
             if t_ns != self.sent_ns:
@@ -192,8 +192,7 @@ def _make_node():
                 self.phase = "walking" if t_ns >= self.walk_from_s * 1e9 else "starting"
                 self._monitor(t_ns)
                 self.next_monitor_ns = t_ns + self.monitor_ns
-            if period is not None and (time.perf_counter() - w0) * 1e9 > period:
-                self.overruns += 1  # this tick's work took longer than the control period (wall)
+            self.timing.tick(w0, t_ns, perf_counter() - w0)  # overrun: work longer than the period
 
         def _publish(self, t_ns: int) -> None:
             cached = self.recent.get(t_ns)
@@ -215,7 +214,7 @@ def _make_node():
         def _diagnostics(self, t_ns: int) -> None:
             ok = self.phase != "learning" and getattr(self, "converged", True)
             ctrl = getattr(self, "ctrl", None)
-            values = {"state": self.phase, "overruns": str(self.overruns)}
+            values = {"state": self.phase, "overruns": str(self.timing.overruns)}
             if ctrl is not None:
                 values.update({"zeta_command": f"{ctrl.zeta_command:g}", "zeta": f"{ctrl.zeta:.6g}",
                                "alpha_command": f"{ctrl.alpha_command:g}", "alpha": f"{ctrl.alpha:.6g}",
@@ -232,7 +231,9 @@ def _make_node():
         def on_exit(self) -> None:
             import json
 
-            exit_log(self, "stats " + json.dumps({**self.activity.summary(), "overruns": self.overruns}))
+            timing = self.timing.summary()
+            exit_log(self, "stats " + json.dumps({**self.activity.summary(), "overruns": timing["overruns"],
+                                                  "tick": timing}))
 
     return CPGNode()
 

@@ -77,6 +77,63 @@ class ActivityStats:
                 "cpu_fraction": round(cpu / wall, 3) if wall > 0 else None}
 
 
+class TickStats:
+    """Wall-clock timing of a node's ticks (one per new ``/clock`` sample): the period between consecutive
+    ticks against the nominal one (the sim-time step between them, i.e. the wall period at real-time
+    factor 1), the work time per tick, and overruns (work longer than the nominal period). Keeps the
+    last ``window`` ticks (bounded memory); the summary is over them."""
+
+    def __init__(self, window: int = 200_000) -> None:
+        from collections import deque
+
+        self.period_s: deque[float] = deque(maxlen=window)
+        self.nominal_s: deque[float] = deque(maxlen=window)
+        self.work_s: deque[float] = deque(maxlen=window)
+        self.ticks = 0
+        self.repeats = 0
+        self.overruns = 0
+        self._last: tuple[float, int] | None = None  # (wall start, sim ns) of the previous tick
+
+    def tick(self, wall_start: float, sim_ns: int, work_s: float) -> None:
+        """A tick at sim time ``sim_ns`` began at ``wall_start`` (perf_counter) and took ``work_s``."""
+        if self._last is not None and sim_ns <= self._last[1]:
+            self.repeats += 1  # a re-sent (or old) clock sample: not a new tick of the loop
+            return
+        self.ticks += 1
+        if self._last is not None:
+            nominal = (sim_ns - self._last[1]) / 1e9
+            self.period_s.append(wall_start - self._last[0])
+            self.nominal_s.append(nominal)
+            if work_s > nominal:
+                self.overruns += 1
+        self.work_s.append(work_s)
+        self._last = (wall_start, sim_ns)
+
+    def summary(self) -> dict:
+        """Milliseconds: wall period (and the nominal one), jitter = period - nominal, work per tick
+        (mean/std/p50/p99/max each; jitter also p50/p99/max of its magnitude); counts."""
+        import numpy as np
+
+        def stats(a) -> dict:
+            a = np.asarray(a) * 1e3
+            return {"mean": round(float(a.mean()), 4), "std": round(float(a.std()), 4),
+                    "p50": round(float(np.median(a)), 4), "p99": round(float(np.percentile(a, 99)), 4),
+                    "max": round(float(a.max()), 4)}
+
+        out: dict = {"ticks": self.ticks, "repeated_clock": self.repeats, "overruns": self.overruns}
+        if self.work_s:
+            out["work_ms"] = stats(self.work_s)
+        if self.period_s:
+            period, nominal = np.asarray(self.period_s), np.asarray(self.nominal_s)
+            out["period_ms"] = {"nominal": round(float(np.median(nominal)) * 1e3, 4), **stats(period),
+                                "count": int(period.size)}
+            jitter = period - nominal
+            absj = stats(np.abs(jitter))
+            out["jitter_ms"] = {**stats(jitter), "abs_p50": absj["p50"], "abs_p99": absj["p99"],
+                                "abs_max": absj["max"]}
+        return out
+
+
 class HotPath:
     """Take messages of a few subscriptions straight from rcl, bypassing the executor.
 
