@@ -53,6 +53,12 @@ Modulation (frozen network only), as parameters of the dynamical system:
   instantaneous change of α would make Q jump, so we let α move as a first-order state. It is updated
   exactly (α* + (α − α*)·e^{−dt/T}) after each RK4 step; the oscillators are untouched.
 
+Integration backends: `step` integrates with RK4 either in numpy (integrators.RK4 over `learning_rhs` /
+`playback_rhs`, the reference) or, when numba is installed, with compiled kernels (kernels.py) that do
+one whole RK4 step with the same equations in the same order (equal to ~1e-12, test_cpg_kernels.py) and
+avoid numpy's per-call overhead. Choose with `backend=` / the `backend` attribute or the environment
+variable CPG_WALKER_BACKEND = auto (default: numba if importable) | numpy | numba.
+
 Time scale: every rate is multiplied by time_scale_b (per CPG), i.e. CPG b evolves in the internal time
 u = time_scale_b·t. Physical frequencies are time_scale·ω (`frequencies()`); this is how teaching.py
 maps any signal's band onto the band the paper's constants were tuned for.
@@ -60,7 +66,9 @@ maps any signal's band onto the band the paper's constants were tuned for.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 
@@ -69,6 +77,20 @@ from cpg_walker.cpg.integrators import RK4
 
 #: RK4 accuracy/stability guard: time_scale·dt·max(|ω|, 2γμ) must not exceed this (see `check_step`).
 MAX_RATE_STEP = 0.5
+
+#: Values of `CPGNetwork.backend` / the CPG_WALKER_BACKEND environment variable.
+BACKENDS = ("auto", "numpy", "numba")
+_kernels: ModuleType | bool | None = False  # False: not tried yet; None: numba unavailable
+
+
+def _load_kernels() -> ModuleType | None:
+    """kernels.py if numba is importable, else None (imported on first use: numba is slow to import)."""
+    global _kernels
+    if _kernels is False:
+        from cpg_walker.cpg import kernels
+
+        _kernels = kernels if kernels.AVAILABLE else None
+    return _kernels  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)
@@ -123,6 +145,8 @@ class CPGNetwork:
     params: the constants μ, γ, ε, η, τ.
     x0, y0, alpha0, phi0: initial state, broadcast to (B, N) (paper: 1, 0, 0, 0).
     time_scale, offset, gain: per CPG, shape (B,) or scalar (see the module docstring).
+    backend: "auto" | "numpy" | "numba" (None: $CPG_WALKER_BACKEND, default "auto"); see the module
+        docstring. "numba" without numba installed raises ImportError; "auto" falls back to numpy.
     """
 
     def __init__(
@@ -137,6 +161,7 @@ class CPGNetwork:
         time_scale: float | np.ndarray = 1.0,
         offset: float | np.ndarray = 0.0,
         gain: float | np.ndarray = 1.0,
+        backend: str | None = None,
     ):
         om = np.asarray(omega0, dtype=float)
         if om.ndim == 1:
@@ -187,6 +212,31 @@ class CPGNetwork:
         self._alpha_learned = self._s[3].copy()
         self._alpha_target = self._s[3].copy()
         self._alpha_relaxing = False
+        self._work = np.empty((5, 5, B, N))  # numba backend: k1..k4 and the stage state
+        self._consts = np.array([self.params.epsilon, self.params.gamma, self._gmu_l, self.params.eta])
+        self._g_none = np.zeros(B)
+        self.backend = os.environ.get("CPG_WALKER_BACKEND", "auto") if backend is None else backend
+
+    # ---------------------------------------------------------------- backend
+    @property
+    def backend(self) -> str:
+        """The requested backend ("auto", "numpy" or "numba"); `uses_numba` says which one runs."""
+        return self._backend
+
+    @backend.setter
+    def backend(self, value: str) -> None:
+        if value not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {value!r}")
+        kernels = None if value == "numpy" else _load_kernels()
+        if value == "numba" and kernels is None:
+            raise ImportError("backend 'numba' requested but numba is not installed (pip install numba)")
+        self._backend = value
+        self._kern = kernels
+
+    @property
+    def uses_numba(self) -> bool:
+        """True if `step` runs the compiled kernels (kernels.py), False if numpy."""
+        return self._kern is not None
 
     # ---------------------------------------------------------------- state access
     @property
@@ -350,6 +400,11 @@ class CPGNetwork:
             self._om_play = self._om_play * ts
             self._k_play = self._k_play * ts
             self._ts_play = ts
+        # the same coefficients as (B,) arrays for the numba kernel
+        B = self.B
+        self._pb_gamma = np.broadcast_to(self._gamma, (B, 1)).ravel().copy()
+        self._pb_gmu = np.broadcast_to(self._gmu, (B, 1)).ravel().copy()
+        self._pb_ts = np.broadcast_to(self._ts_play, (B, 1)).ravel().copy()
 
     # ---------------------------------------------------------------- modulation and perturbation
     def set_frequency_scale(self, zeta: float | np.ndarray) -> None:
@@ -420,14 +475,32 @@ class CPGNetwork:
             if teach is None:
                 raise ValueError("a learning network needs a teaching input (or call freeze())")
             Pn = self.normalise_teaching(teach)
-            if Pn.ndim == 1:
+            kern = self._kern
+            if kern is not None:
+                P0, Pm, P1 = (Pn, Pn, Pn) if Pn.ndim == 1 else (Pn[0], Pn[1], Pn[2])
+                g = self._g
+                kern.learning_step(
+                    self._s, float(dt), P0, Pm, P1, self._ref, self._ref_omega, self._k, self._learn_phi,
+                    self.time_scale, self._scaled_h, self._g_none if g is None else g, g is not None,
+                    self._consts, self._work,
+                )
+            elif Pn.ndim == 1:
                 self._rk_full.step(self.learning_rhs, self._s, dt, Pn, Pn, Pn)
             else:
                 self._rk_full.step(self.learning_rhs, self._s, dt, Pn[0], Pn[1], Pn[2])
         else:
             if teach is not None:
                 raise ValueError("the network is frozen: it takes no teaching input (unfreeze() to learn)")
-            self._rk_xy.step(self.playback_rhs, self._s[:2], dt, None, None, None)
+            kern = self._kern
+            if kern is not None:
+                g = self._g
+                kern.playback_step(
+                    self._s, float(dt), self._ref, self._rho, self._phi_play, self._om_play, self._k_play,
+                    self._pb_gamma, self._pb_gmu, self._g_none if g is None else g * self._pb_ts,
+                    g is not None, self._work,
+                )
+            else:
+                self._rk_xy.step(self.playback_rhs, self._s[:2], dt, None, None, None)
             if self._alpha_relaxing:
                 self._relax_alpha(dt)
         self.t += dt
