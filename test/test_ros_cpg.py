@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -39,6 +40,14 @@ def test_corrupt_cpg_file_is_a_clear_error(graph, tmp_path):
     assert graph.wait("cpg_node", 60) == 2
     log = graph.procs["cpg_node"].log()
     assert "bad.yaml" in log and "Traceback" not in log
+
+
+@pytest.mark.parametrize("params", [{"zeta": 3.0}, {"alpha": -0.5}, {"zeta": math.nan}])
+def test_bad_start_up_modulation_is_a_clear_error(graph, params):
+    graph.start("cpg_node", **params)
+    assert graph.wait("cpg_node", 60) == 2
+    log = graph.procs["cpg_node"].log()
+    assert "error" in log and next(iter(params)) in log and "Traceback" not in log, log
 
 
 def test_targets_state_and_diagnostics_published(graph, probe):
@@ -84,6 +93,11 @@ def test_60s_lockstep_walk_is_deterministic(tmp_path):
     assert report["zeta"] == 1.0 and report["feedback"] is False
     assert report["graph"]["torque_age_s"]["max"] == 0.0  # every period used its own command
     assert (tmp_path / "walk60" / "walk.json").exists()
+    stats = json.loads(re.findall(r"stats (\{.*\})", (tmp_path / "walk60" / "graph_logs" / "cpg_node.log")
+                                  .read_text())[-1])["tick"]
+    assert stats["ticks"] == 30000  # one per control period
+    # no tick stalls the loop (the first CPG step at the hand-over once took ~1 s: numba compiling)
+    assert stats["work_ms"]["max"] < 250.0, stats
     run_graph_walk(tmp_path / "walk20", duration=20.0)
     long, short = (json.loads((tmp_path / d / "graph_record.json").read_text()) for d in ("walk60", "walk20"))
     n = len(short["t"])

@@ -112,6 +112,7 @@ def _make_node():
                                                                       g("n_oscillators").value)
             self.source = CPGGaitSource(self.ctrl, zeta=g("zeta").value, alpha=g("alpha").value)
             self.walk_from_s = self.source.handover + self.source.blend
+            self._warm_up()
             self.phase = "converged"
             self.add_on_set_parameters_callback(self._on_set)
             self.lookahead = bool(g("lookahead").value)
@@ -150,6 +151,22 @@ def _make_node():
             except FileNotFoundError as exc:
                 raise ValueError(str(exc)) from None
             return ctrl, str(path), bool(ctrl.meta.get("learning", {}).get("converged", True))
+
+        def _warm_up(self) -> None:
+            """Step a copy of the CPG (with the modulation filters moving) a few times: compiled kernels
+            are compiled or loaded on first use (about 1 s with numba), which must not happen at the
+            hand-over tick mid-walk (in real time the robot would go without targets and fall)."""
+            import time
+
+            t0 = time.perf_counter()
+            spare = HumanoidCPG.from_dict(self.ctrl.to_dict())
+            spare.set_zeta(0.9 * spare.zeta_command or 0.9)
+            spare.set_alpha(0.9 * spare.alpha_command or 0.9)
+            for _ in range(3):
+                spare.step(self.source.h)
+                spare.joint_targets()
+            state_vector(spare)
+            self.get_logger().info(f"CPG warmed up in {time.perf_counter() - t0:.3f} s")
 
         # ---------------------------------------------------------------- parameters
         def _on_set(self, params) -> SetParametersResult:

@@ -205,6 +205,7 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
     """rclpy.init, build the node, then ``loop(node)`` (default: spin) until Ctrl-C/SIGTERM/shutdown;
     destroy the node and shut down without a traceback. Returns the exit status."""
     import rclpy
+    from rclpy.exceptions import InvalidParameterValueException
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     rclpy.init(args=argv)
@@ -223,7 +224,7 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
                 executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except ValueError as exc:  # bad parameters at start-up: one clear line, no traceback
+    except (ValueError, InvalidParameterValueException) as exc:  # bad parameters at start-up: one line
         print(f"{argv[0]}: error: {exc}", file=sys.stderr)
         status = 2
     except Exception:
