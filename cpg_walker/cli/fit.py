@@ -1,4 +1,5 @@
-"""`cpg-walker fit --csv FILE [--column NAME] [--oscillators N] --out DIR`: learn a recorded signal."""
+"""`cpg-walker fit --csv FILE [--column NAME] [--time-column NAME] [--oscillators N] --out DIR`: learn a
+recorded signal."""
 
 from __future__ import annotations
 
@@ -7,7 +8,10 @@ import argparse
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fit", help="learn a periodic signal from a CSV into a CPG; write fit.json and a PNG")
-    p.add_argument("--csv", required=True, help="CSV with a header: time (s) first, then signal columns")
+    p.add_argument("--csv", required=True,
+                   help="CSV with a header: a time column (s) and signal columns, any sampling rate")
+    p.add_argument("--time-column", default=None, metavar="NAME",
+                   help="time column (default: one named time, t, time_s, timestamp, ...; else the first)")
     p.add_argument("--column", default=None, help="signal column to learn (default: every column)")
     p.add_argument("--oscillators", type=int, default=None,
                    help="oscillators per CPG (default: number of significant spectral components)")
@@ -22,4 +26,4 @@ def _run(args: argparse.Namespace) -> int:
 
     if args.oscillators is not None and args.oscillators < 1:
         raise ValueError(f"--oscillators must be >= 1, got {args.oscillators}")
-    return run_fit(Path(args.csv), args.column, args.oscillators, Path(args.out))
+    return run_fit(Path(args.csv), args.column, args.oscillators, Path(args.out), args.time_column)

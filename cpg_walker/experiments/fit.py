@@ -101,10 +101,30 @@ def fit_signal(
 
 
 # ------------------------------------------------------------------------------------------- CSV input
-def read_csv(path: str | Path, column: str | None) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Read a CSV with a header: first column = time (s), others = signals. Returns t, values, names.
+TIME_NAMES = ("time", "t", "time_s", "t_s", "timestamp", "seconds", "sec", "s")
 
-    `column` selects one signal column by name (default: all). Errors name the file and line."""
+
+def pick_time_column(header: list[str], time_column: str | None = None) -> int:
+    """Index of the time column: the one named `time_column`; else the first header that names time
+    (`time`, `t`, `time_s`, `timestamp`, `seconds`, … or any name starting with "time", any case, units in
+    brackets ignored); else the first column."""
+    if time_column is not None:
+        if time_column not in header:
+            raise ValueError(f"no time column named {time_column!r} (columns: {', '.join(header)})")
+        return header.index(time_column)
+    for i, name in enumerate(header):
+        bare = name.split("[")[0].split("(")[0].strip().lower()
+        if bare in TIME_NAMES or bare.startswith("time"):
+            return i
+    return 0
+
+
+def read_csv(
+    path: str | Path, column: str | None, time_column: str | None = None
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Read a CSV with a header: a time column (s; see `pick_time_column`) and signal columns.
+    Returns t, values, names. `column` selects one signal column by name (default: all the others).
+    Errors name the file and line."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"CSV file not found: {path}")
@@ -116,18 +136,23 @@ def read_csv(path: str | Path, column: str | None) -> tuple[np.ndarray, np.ndarr
     header = [h.strip() for h in rows[0]]
     if len(header) < 2:
         raise ValueError(f"{path}:1: need a header with a time column and at least one signal column")
+    try:
+        tcol = pick_time_column(header, time_column)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    signals = [name for i, name in enumerate(header) if i != tcol]
     if column is not None:
-        if column not in header[1:]:
-            raise ValueError(f"{path}: no column named {column!r} (columns: {', '.join(header[1:])})")
+        if column not in signals:
+            raise ValueError(f"{path}: no column named {column!r} (columns: {', '.join(signals)})")
         cols = [header.index(column)]
     else:
-        cols = list(range(1, len(header)))
+        cols = [i for i in range(len(header)) if i != tcol]
     data = np.empty((len(rows) - 1, 1 + len(cols)))
     for i, row in enumerate(rows[1:]):
         line = i + 2
         if len(row) != len(header):
             raise ValueError(f"{path}:{line}: {len(row)} fields, the header has {len(header)}")
-        for j, c in enumerate([0, *cols]):
+        for j, c in enumerate([tcol, *cols]):
             cell = row[c].strip()
             try:
                 value = float(cell)
@@ -148,7 +173,8 @@ def read_csv(path: str | Path, column: str | None) -> tuple[np.ndarray, np.ndarr
 
 
 # ------------------------------------------------------------------------------------------- CLI job
-def run_fit(csv_path: Path, column: str | None, n_oscillators: int | None, out_dir: Path) -> int:
+def run_fit(csv_path: Path, column: str | None, n_oscillators: int | None, out_dir: Path,
+            time_column: str | None = None) -> int:
     """Read, learn, write DIR/fit.json and DIR/fit.png; print the numbers."""
     import json
 
@@ -157,7 +183,7 @@ def run_fit(csv_path: Path, column: str | None, n_oscillators: int | None, out_d
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t, values, names = read_csv(csv_path, column)
+    t, values, names = read_csv(csv_path, column, time_column)
     res = fit_signal(t, values, n_oscillators, progress_label="fit: learning")
     out_dir.mkdir(parents=True, exist_ok=True)
     freqs = res.net.frequencies()
