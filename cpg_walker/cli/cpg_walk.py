@@ -1,5 +1,6 @@
 """`cpg-walker cpg-walk --out DIR [--duration S] [--zeta Z] [--alpha A] [--oscillators N] [--cpg FILE]`:
-the learned humanoid CPG walks the simulated HOAP-2 in-process (no ROS, no feedback); DIR/walk.json."""
+the learned humanoid CPG walks the simulated HOAP-2 in-process (no ROS); DIR/walk.json.
+`--feedback on [--pathways lateral,pendulum,reset]` closes the paper's feedback pathways (cpg/feedback.py)."""
 
 from __future__ import annotations
 
@@ -33,6 +34,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--blend", type=float, default=1.0, metavar="S", help="hand-over cross-fade (s)")
     p.add_argument("--schedule", type=_schedule, default=None, metavar="T,Z,A;...",
                    help="commands (time, zeta, alpha) applied during the walk")
+    p.add_argument("--feedback", choices=("on", "off"), default="off",
+                   help="sensory feedback pathways (paper Sec. III-B; config/feedback.yaml), default off")
+    p.add_argument("--pathways", default="lateral,pendulum,reset", metavar="P,P,...",
+                   help="with --feedback on: any of lateral, pendulum, reset (default all three)")
     p.add_argument("--no-render", action="store_true", help="skip the filmstrip")
     p.set_defaults(func=_run)
 
@@ -45,8 +50,11 @@ def _run(args: argparse.Namespace) -> int:
         os.environ.setdefault("MUJOCO_GL", "egl")
     from cpg_walker.experiments.cpg_walk import run_cpg_walk
 
+    pathways = None
+    if args.feedback == "on":
+        pathways = tuple(p.strip() for p in args.pathways.split(",") if p.strip())
     m = run_cpg_walk(args.out, args.duration, args.zeta, args.alpha, args.oscillators, args.cpg,
-                     args.transition, args.blend, args.schedule, render=not args.no_render)
+                     args.transition, args.blend, args.schedule, render=not args.no_render, pathways=pathways)
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps", "lateral_drift_m",
             "heading_change_deg", "n_oscillators")
     print(json.dumps({k: m[k] for k in keys}))

@@ -387,13 +387,14 @@ class HumanoidCPG:
             state[:] = command
         return True
 
-    def step(self, dt: float) -> None:
-        """Advance the frozen network and the modulation filters by dt (s)."""
+    def step(self, dt: float, feedback: np.ndarray | None = None) -> None:
+        """Advance the frozen network and the modulation filters by dt (s); `feedback` = the (10,) g_k
+        of eqs 16–17 held over the step (cpg/feedback.py), None = open loop."""
         if self._filter(self._zf, self.zeta_command, dt):
             self.net.set_frequency_scale(float(self._zf[-1]))
         if self._filter(self._af, self.alpha_command, dt):
             self.net.set_amplitude_scale(float(self._af[-1]))
-        self.net.step(dt)
+        self.net.step(dt, feedback=feedback)
 
     def joint_targets(self) -> tuple[np.ndarray, np.ndarray]:
         """(q*, q̇*) of the 10 DOFs: offset + gain·Σ α x and its time derivative (α held)."""
@@ -644,6 +645,7 @@ class CPGGaitSource:
                 self.schedule = sorted([*self.schedule, (self.handover + self.blend, zeta, alpha)])
         self._t_net = self.handover  # sim time the network state corresponds to
         self._cache = None
+        self.feedback_g: np.ndarray | None = None  # eqs 16–17 g_k applied while stepping (feedback.py)
 
     def _advance(self, t: float) -> None:
         while self.schedule and self.schedule[0][0] <= t + 1e-12:
@@ -651,7 +653,7 @@ class CPGGaitSource:
             self.ctrl.set_zeta(z)
             self.ctrl.set_alpha(a)
         while self._t_net + 0.5 * self.h <= t:
-            self.ctrl.step(self.h)
+            self.ctrl.step(self.h, self.feedback_g)
             self._t_net += self.h
 
     def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:

@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
+from cpg_walker.cpg.feedback import FeedbackController, FeedbackGaitSource
 from cpg_walker.cpg.humanoid import CPGGaitSource, HumanoidCPG
 from cpg_walker.experiments.replay import run_replay, summarize
 
@@ -49,15 +51,19 @@ def load_controller(cpg_file: str | None, n_oscillators: int | None = None) -> t
 
 def walk(ctrl: HumanoidCPG, duration: float, zeta: float = 1.0, alpha: float = 1.0,
          transition: str = "recording", blend_s: float = 1.0, handover_s: float | None = None,
-         schedule: list[tuple[float, float, float]] | None = None, on_log=None, progress=None) -> dict:
-    """One walk from standing; returns the replay metrics plus the run's settings."""
+         schedule: list[tuple[float, float, float]] | None = None, on_log=None, progress=None,
+         feedback: FeedbackController | None = None) -> dict:
+    """One walk from standing; returns the replay metrics plus the run's settings. With `feedback`
+    (cpg/feedback.py) the source observes the IMU tilt and sole loads and closes the chosen pathways
+    after the hand-over cross-fade (an empty pathway tuple only observes: calibration)."""
     from cpg_walker.robot.hoap2 import Hoap2Sim
     from cpg_walker.robot.pid import PidLaw, load_pid_config
 
     if not (duration > 0 and math.isfinite(duration)):
         raise ValueError(f"--duration must be a positive number of seconds, got {duration}")
-    source = CPGGaitSource(ctrl, transition=transition, handover_s=handover_s, blend_s=blend_s,
-                           schedule=schedule, zeta=zeta, alpha=alpha)
+    kw = dict(transition=transition, handover_s=handover_s, blend_s=blend_s, schedule=schedule, zeta=zeta,
+              alpha=alpha)
+    source = CPGGaitSource(ctrl, **kw) if feedback is None else FeedbackGaitSource(ctrl, feedback, **kw)
     cfg = load_pid_config()
     sim = Hoap2Sim()
     sim.reset()
@@ -66,11 +72,32 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float = 1.0, alpha: float = 1
                         delay_s=float(cfg.get("delay_s", 0.002)), progress=progress, on_log=on_log)
     m = summarize(result, period_s=ctrl.period / abs(zeta) if zeta else None)
     m.update({
-        "zeta": zeta, "alpha": alpha, "feedback": False, "n_oscillators": int(ctrl.net.N),
+        "zeta": zeta, "alpha": alpha, "feedback": bool(feedback is not None and feedback.pathways),
+        "n_oscillators": int(ctrl.net.N),
         "transition": transition, "handover_s": round(source.handover, 3), "blend_s": blend_s,
         "schedule": [list(s) for s in (schedule or [])],
         "touchdowns_s": {k: [round(x, 3) for x in v] for k, v in result.touchdowns.items()},
     })
+    if isinstance(source, FeedbackGaitSource):
+        m["feedback_pathways"] = list(feedback.pathways)
+        m["feedback_config"] = asdict(feedback.cfg)
+        m["phase_resets"] = len(feedback.resets)
+        if feedback.resets:
+            m["phase_reset_abs_mean_rad"] = round(float(np.mean([abs(d) for _, d in feedback.resets])), 4)
+        if source.g_trace:
+            tr = np.array(source.g_trace)
+            m["tilt_after_handover"] = {
+                "roll_rms_rad": round(float(np.sqrt(np.mean(tr[:, 1] ** 2))), 4),
+                "roll_abs_mean_rad": round(float(np.mean(np.abs(tr[:, 1]))), 4),
+                "pitch_mean_rad": round(float(np.mean(tr[:, 2] + feedback.cfg.pitch_reference_rad)), 4),
+                "pitch_rms_about_ref_rad": round(float(np.sqrt(np.mean(tr[:, 2] ** 2))), 4),
+                "g_ankle2_max": round(float(np.max(np.abs(tr[:, 3]))), 3),
+                "g_knee_max": round(float(np.max(np.abs(tr[:, 4]))), 3)}
+        if source.touchdown_phases:
+            ph = np.array(source.touchdown_phases)
+            m["right_touchdown_phase_rad"] = {
+                "circular_mean": round(float(np.angle(np.mean(np.exp(1j * ph)))), 4),
+                "resultant_length": round(float(np.abs(np.mean(np.exp(1j * ph)))), 4), "n": len(ph)}
     after = [x for x in result.touchdowns["right"] if x > source.handover + blend_s]
     if len(after) > 2:
         m["right_touchdown_interval_after_handover_s"] = round(float(np.median(np.diff(after))), 3)
@@ -92,8 +119,10 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float = 1.0, alpha: float = 1
 def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float = 1.0, alpha: float = 1.0,
                  n_oscillators: int | None = None, cpg_file: str | None = None, transition: str = "recording",
                  blend_s: float = 1.0, schedule: list[tuple[float, float, float]] | None = None,
-                 render: bool = True, progress_enabled: bool = True) -> dict:
-    """`cpg-walker cpg-walk`: walk, write DIR/walk.json and DIR/filmstrip.png."""
+                 render: bool = True, progress_enabled: bool = True,
+                 pathways: tuple[str, ...] | None = None) -> dict:
+    """`cpg-walker cpg-walk`: walk, write DIR/walk.json and DIR/filmstrip.png. `pathways` (None = no
+    feedback) closes those feedback pathways with config/feedback.yaml."""
     from cpg_walker.cli.progress import Progress
 
     ctrl, origin = load_controller(cpg_file, n_oscillators)
@@ -106,8 +135,13 @@ def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float = 1.0, alpha:
 
         grabber = FrameGrabber(Hoap2Sim().model, every_s=max(0.2, duration / 40), width=400, height=300)
     progress = Progress(duration, f"cpg-walk N={ctrl.net.N}", enabled=progress_enabled)
+    fb = None
+    if pathways is not None:
+        from cpg_walker.cpg.feedback import FeedbackConfig
+
+        fb = FeedbackController(FeedbackConfig.load(), pathways)
     m = walk(ctrl, duration, zeta, alpha, transition, blend_s, schedule=schedule, on_log=grabber,
-             progress=progress)
+             progress=progress, feedback=fb)
     progress.close()
     m["cpg_file"] = origin
     m["learned_gait_frequency_hz"] = ctrl.gait_frequency_hz()

@@ -2,7 +2,10 @@
 
 The PID runs as an explicit torque law at ``rate_hz`` on joint state that is ``delay_s`` old, and its
 torque is held between ticks - the way it will run as a ROS node. The target source is pluggable: any
-object with ``names`` and ``targets(t) -> (q, qd)`` (the recorded gait, later a CPG).
+object with ``names`` and ``targets(t) -> (q, qd)`` (the recorded gait, later a CPG). A source that
+also has ``observe(t, tilt, loads)`` gets, at every control tick before ``targets(t)``, the chest IMU
+tilt (roll, pitch) in rad computed from the IMU orientation quaternion and the (left, right) sole loads
+in N — the readings a ROS node gets from /imu and /foot_load (sensory feedback, cpg/feedback.py).
 """
 
 from __future__ import annotations
@@ -91,10 +94,15 @@ def run_replay(
     fell, fall_time = False, None
     tau_full = np.zeros(len(JOINT_NAMES))
     pid.reset()
+    observe = getattr(source, "observe", None)
+    if observe is not None:
+        from cpg_walker.cpg.feedback import tilt_from_quat
     for k in range(n_steps):
         history.append((sim.data.qpos[sim._qadr].copy(), sim.data.qvel[sim._dadr].copy()))
         if k % per_tick == 0:
             q, v = history[0]
+            if observe is not None:
+                observe(sim.time - t0, tilt_from_quat(sim.imu().quat), sim.sole_loads())
             qt, vt = source.targets(sim.time - t0)
             tau_full[sel] = pid.step(qt, vt, q[sel], v[sel], per_tick * dt)
             sim.step(tau_full, 1)
