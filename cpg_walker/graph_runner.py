@@ -1,0 +1,171 @@
+"""The node graph in the foreground (``cpg-walker graph``): start it with ``cpg_walker.graph.Graph``,
+stream the nodes' log lines with a prefix, stop everything on Ctrl-C / SIGTERM / SIGHUP or when a node
+(normally the sim, at the end of ``duration``) exits."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TextIO
+
+PREFIX = {"sim_node": "sim", "pid_node": "pid", "cpg_node": "cpg", "target_player_node": "player"}
+
+
+@dataclass
+class GraphSpec:
+    pacing: str = "realtime"
+    duration: float = 0.0
+    zeta: float | None = None
+    alpha: float | None = None
+    player: bool = False
+    domain_id: int | None = None
+    params: list[tuple[str, str, object]] = field(default_factory=list)
+    log_dir: str | None = None
+
+    def node_params(self) -> dict[str, dict[str, object]]:
+        """Each node's start-up parameters (validated: ValueError)."""
+        from cpg_walker.nodes.cpg_node import validate_modulation
+
+        if self.pacing not in ("realtime", "lockstep", "fast"):
+            raise ValueError(f"pacing must be realtime, lockstep or fast, got {self.pacing!r}")
+        if not (self.duration >= 0 and math.isfinite(self.duration)):
+            raise ValueError(f"--duration must be >= 0 sim seconds (0: until stopped), got {self.duration}")
+        target = "target_player_node" if self.player else "cpg_node"
+        out: dict[str, dict[str, object]] = {
+            "pid_node": {"lockstep": self.pacing == "lockstep", "wait_for_targets": True},
+            target: {},
+            "sim_node": {"pacing": self.pacing, "duration": float(self.duration)},
+        }
+        for name in ("zeta", "alpha"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            if self.player:
+                raise ValueError(f"--{name} is a cpg_node parameter; not with --player")
+            reason = validate_modulation(name, value)
+            if reason:
+                raise ValueError(reason)
+            out["cpg_node"][name] = float(value)
+        for node, name, value in self.params:
+            if node not in out:
+                raise ValueError(f"-p {node}:{name}: {node} is not part of this graph ({', '.join(out)})")
+            out[node][name] = value
+        return out
+
+
+def resolve_domain(domain_id: int | None) -> tuple[int, str]:
+    """(domain, where it came from): the option, else ROS_DOMAIN_ID, else a free one."""
+    from cpg_walker.graph import quiet_domain_id
+
+    if domain_id is not None:
+        chosen, how = domain_id, "--domain-id"
+    elif os.environ.get("ROS_DOMAIN_ID", "").strip():
+        try:
+            chosen, how = int(os.environ["ROS_DOMAIN_ID"]), "ROS_DOMAIN_ID"
+        except ValueError:
+            raise ValueError(f"ROS_DOMAIN_ID must be an integer, got "
+                             f"{os.environ['ROS_DOMAIN_ID']!r}") from None
+    else:
+        return quiet_domain_id(), "a free one picked at random"
+    if not 0 <= chosen <= 232:
+        raise ValueError(f"the DDS domain must be in 0..232, got {chosen}")
+    return chosen, how
+
+
+class LogTail:
+    """Follows the nodes' log files and prints their new complete lines, prefixed with the node."""
+
+    def __init__(self, out: TextIO):
+        self.out = out
+        self.pos: dict[Path, int] = {}
+        self.partial: dict[Path, str] = {}
+
+    def poll(self, logs: dict[str, Path], final: bool = False) -> None:
+        for node, path in logs.items():
+            try:
+                with open(path, "rb") as f:
+                    f.seek(self.pos.get(path, 0))
+                    chunk = f.read()
+                    self.pos[path] = f.tell()
+            except OSError:
+                continue
+            text = self.partial.get(path, "") + chunk.decode(errors="replace")
+            lines = text.split("\n")
+            self.partial[path] = "" if final else lines.pop()
+            for line in lines:
+                if line or not final:
+                    self.out.write(f"[{PREFIX.get(node, node)}] {line}\n")
+        self.out.flush()
+
+
+class _StopSignalError(Exception):
+    pass
+
+
+def _raise_stop(signum: int, _frame: object) -> None:
+    raise _StopSignalError(signal.Signals(signum).name)
+
+
+def banner(domain: int, how: str, spec: GraphSpec, log_dir: Path) -> str:
+    target = "target_player_node (recorded gait)" if spec.player else "cpg_node"
+    until = f"{spec.duration:g} sim s" if spec.duration else "until Ctrl-C"
+    lines = [f"ROS_DOMAIN_ID={domain} ({how}); sim_node + pid_node + {target}, {spec.pacing} pacing, {until}",
+             f"node logs: {log_dir}",
+             "from another shell:"]
+    if not spec.player:
+        lines.append(f"  ROS_DOMAIN_ID={domain} cpg-walker param set /cpg zeta 0.8")
+    lines += [f"  ROS_DOMAIN_ID={domain} cpg-walker param list /sim",
+              f"  ROS_DOMAIN_ID={domain} cpg-walker topic list",
+              f"  ROS_DOMAIN_ID={domain} cpg-walker topic echo /joint_targets --once",
+              f"  ROS_DOMAIN_ID={domain} cpg-walker topic hz /clock"]
+    return "\n".join(lines)
+
+
+def run_foreground(spec: GraphSpec, out: TextIO = sys.stdout) -> int:
+    """Run the graph until the sim ends (or a node fails, or a signal); the exit status: 0 when the sim
+    ended by itself with status 0 (or a signal stopped everything), else the failing node's status."""
+    from cpg_walker.graph import Graph
+
+    params = spec.node_params()
+    domain, how = resolve_domain(spec.domain_id)
+    log_dir = Path(spec.log_dir) if spec.log_dir else Path(tempfile.mkdtemp(prefix="cpg_walker_graph_"))
+    handlers = {s: signal.signal(s, _raise_stop) for s in (signal.SIGTERM, signal.SIGHUP)}
+    tail = LogTail(out)
+    status = 0
+    with Graph(log_dir, domain_id=domain) as g:
+        try:
+            print(banner(domain, how, spec, log_dir), file=out, flush=True)
+            for node, p in params.items():
+                g.start(node, **p)
+            logs = {name: proc.log_path for name, proc in g.procs.items()}
+            while True:
+                tail.poll(logs)
+                ended = {n: p.popen.poll() for n, p in g.procs.items() if p.popen.poll() is not None}
+                if ended:
+                    name, code = next(iter(ended.items()))
+                    if name == "sim_node" and code == 0:
+                        print("sim_node finished; stopping the graph", file=out, flush=True)
+                    else:
+                        print(f"{name} exited with status {code}; stopping the graph", file=out, flush=True)
+                        status = code if code else 1
+                    break
+                time.sleep(0.1)
+        except (KeyboardInterrupt, _StopSignalError) as exc:
+            what = "SIGINT" if isinstance(exc, KeyboardInterrupt) else str(exc)
+            print(f"{what}: stopping the graph", file=out, flush=True)
+        finally:
+            handlers.setdefault(signal.SIGINT, signal.getsignal(signal.SIGINT))
+            for s in handlers:  # a second Ctrl-C must not abort the clean stop (SIGKILL after 5 s)
+                signal.signal(s, signal.SIG_IGN)
+            codes = g.stop_all(timeout=5.0)
+            tail.poll({n: p.log_path for n, p in g.procs.items()}, final=True)
+            for s, h in handlers.items():
+                signal.signal(s, h)
+    print("stopped: " + ", ".join(f"{n} {c}" for n, c in codes.items()), file=out, flush=True)
+    return status
