@@ -1,7 +1,7 @@
 """Launch the HOAP-2 graph on a ROS 2 install: sim_node + pid_node (+ target_player_node with
 ``player:=true``). Example: ``ros2 launch cpg_walker sim_pid.launch.py pacing:=lockstep player:=true``.
 
-Without ROS's launch tools (a pip install), use cpg_walker.graph.Graph instead.
+Without ROS's launch tools (a pip install), use cpg_walker.nodes.graph.Graph instead.
 """
 
 from launch.actions import DeclareLaunchArgument

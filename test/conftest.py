@@ -9,7 +9,7 @@ import pytest
 
 @pytest.fixture
 def graph(tmp_path, monkeypatch):
-    from cpg_walker.graph import Graph
+    from cpg_walker.nodes.graph import Graph
 
     g = Graph(tmp_path / "logs")
     monkeypatch.setenv("ROS_DOMAIN_ID", str(g.domain_id))

@@ -1,4 +1,4 @@
-"""Feedback pathways (cpg/feedback.py): the laws of eqs 14–20, the radial projection, phase resetting,
+"""Feedback pathways (walker/feedback.py): the laws of eqs 14–20, the radial projection, phase resetting,
 and one closed-loop walk."""
 
 import math
@@ -6,7 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from cpg_walker.cpg.feedback import (
+from cpg_walker.cpg.hopf import phase as oscillator_phase
+from cpg_walker.paths import config_path
+from cpg_walker.robot.contact import TouchdownDetector
+from cpg_walker.robot.hoap2 import tilt_from_quat
+from cpg_walker.walker.controller import HumanoidCPG
+from cpg_walker.walker.feedback import (
     ANKLE1,
     ANKLE2,
     HIP1,
@@ -14,17 +19,12 @@ from cpg_walker.cpg.feedback import (
     RIGHT_HIP2,
     FeedbackConfig,
     FeedbackController,
-    TouchdownDetector,
     feedback_vector,
     gains,
     lateral_terms,
-    oscillator_phase,
     pendulum_term,
     phase_reset,
-    tilt_from_quat,
 )
-from cpg_walker.cpg.humanoid import HumanoidCPG
-from cpg_walker.paths import config_path
 
 
 @pytest.fixture(scope="module")

@@ -7,10 +7,12 @@ import numpy as np
 import pytest
 import yaml
 
-from cpg_walker.cpg.humanoid import CHAIN, DOFS, HIP2_PAIR, CPGGaitSource, HumanoidCPG
-from cpg_walker.experiments.learn import free_run_errors, learning_settings
+from cpg_walker.experiments.learn import free_run_errors
 from cpg_walker.paths import config_path
 from cpg_walker.robot.joints import JOINT_NAMES
+from cpg_walker.walker.controller import CHAIN, DOFS, HIP2_PAIR, HumanoidCPG
+from cpg_walker.walker.gait_source import CPGGaitSource
+from cpg_walker.walker.learning import learning_settings
 
 RECORDED_HZ = 1.0 / 2.513  # the walk's steady stride (find_steady_cycle)
 # Per-DOF RMS bounds (deg) of the frozen network against the recorded stride. N = 3 keeps the fundamental

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from cpg_walker.cli.main import main
-from cpg_walker.experiments.replay import run_replay, summarize
 from cpg_walker.robot.gait_data import GaitPlayback, load_gait
 from cpg_walker.robot.hoap2 import Hoap2Sim
 from cpg_walker.robot.pid import PidLaw, load_pid_config
+from cpg_walker.walker.loop import run_replay, summarize
 
 # Forward-distance bounds: the recordings are walked at ~0.075 m/s (walk) and ~0.045 m/s (slow); a robot
 # that shuffles in place or slides backwards stays far below these.

@@ -84,7 +84,7 @@ def _node_pids(domain: int) -> list[int]:
 
 
 def test_graph_command_ends_by_itself_and_leaves_nothing_behind(tmp_path):
-    from cpg_walker.graph import isolated_env, quiet_domain_id
+    from cpg_walker.nodes.graph import isolated_env, quiet_domain_id
 
     domain = quiet_domain_id()
     env = isolated_env(domain)

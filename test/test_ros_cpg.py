@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from ros_helpers import double, string
 
-from cpg_walker.cpg.humanoid import DOFS
+from cpg_walker.walker.controller import DOFS
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -122,10 +122,10 @@ def test_runtime_zeta_and_alpha_change_the_gait(graph, probe, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import Float64MultiArray
 
-    from cpg_walker.cpg.humanoid import HumanoidCPG
     from cpg_walker.experiments.replay_graph import record_to_result
-    from cpg_walker.nodes.sim_core import RunRecord
     from cpg_walker.paths import config_path
+    from cpg_walker.robot.run_record import RunRecord
+    from cpg_walker.walker.controller import HumanoidCPG
 
     period = HumanoidCPG.load(config_path("cpg_humanoid.yaml")).period  # learned stride period (2.513 s)
     t_zeta, t_alpha, duration = 7.0, 22.0, 27.0  # sim s; the CPG has taken over at 6.6 s

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from ros_helpers import Probe, double, string
 
-from cpg_walker.graph import Graph
+from cpg_walker.nodes.graph import Graph
 from cpg_walker.robot.joints import JOINT_NAMES
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -211,6 +211,6 @@ def test_pid_gains_are_runtime_parameters_and_validated(graph, probe):
     values = probe.get_params("pid", ["kp.leg", "target_timeout"])
     assert values[0].double_value == 120.0 and values[1].double_value == pytest.approx(0.1)
     # the harness sees this graph on its domain, so another graph would not pick it
-    from cpg_walker.graph import domain_is_quiet
+    from cpg_walker.nodes.graph import domain_is_quiet
 
     assert not domain_is_quiet(graph.domain_id, wait=5.0)

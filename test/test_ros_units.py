@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cpg_walker.graph import isolated_env, param_arg
+from cpg_walker.nodes.graph import isolated_env, param_arg
 from cpg_walker.nodes.validation import (
     check_finite_scalar,
     from_ns,
@@ -118,7 +118,7 @@ def test_joint_state_round_trip_and_validation_of_messages():
 
 
 def test_standing_sole_wrenches_carry_the_weight():
-    from cpg_walker.nodes.sim_core import sole_wrenches
+    from cpg_walker.robot.contact import sole_wrenches
     from cpg_walker.robot.hoap2 import Hoap2Sim, default_standing_posture
     from cpg_walker.robot.pid import PidLaw
 

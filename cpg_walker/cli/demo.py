@@ -43,7 +43,7 @@ def _run(args: argparse.Namespace) -> int:
             "heading_change_deg")
     print(json.dumps({"replay": {k: report[k] for k in keys}}))
     print("== 3/4  learning the 10-DOF humanoid CPG from the recorded walk (Fig. 6)", file=sys.stderr)
-    learned = run_learn(str(out / "learn"), keep_config=False)
+    learned = run_learn(str(out / "learn"))
     print(json.dumps({"learn": {k: learned[k] for k in ("gait_frequency_hz", "recorded_gait_frequency_hz",
                                                          "max_rms_error_deg", "n_oscillators")}}))
     print("== 4/4  the simulated HOAP-2 walks 60 s from the learned CPG (zeta = 1, alpha = 1)",

@@ -6,13 +6,15 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.nodes.runtime import PACINGS
+
 ALIASES = {"sim": "sim_node", "pid": "pid_node", "cpg": "cpg_node", "player": "target_player_node",
            "target_player": "target_player_node"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("graph", help="run the ROS node graph in the foreground (like `ros2 launch`)")
-    p.add_argument("--pacing", choices=("realtime", "lockstep", "fast"), default="realtime",
+    p.add_argument("--pacing", choices=PACINGS, default="realtime",
                    help="the sim node's pacing (default realtime)")
     p.add_argument("--duration", type=float, default=0.0, metavar="S",
                    help="sim seconds, then everything stops (default 0: until Ctrl-C)")
@@ -47,7 +49,7 @@ def parse_param(text: str) -> tuple[str, str, object]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from cpg_walker.graph_runner import GraphSpec, run_foreground
+    from cpg_walker.nodes.graph_runner import GraphSpec, run_foreground
 
     spec = GraphSpec(pacing=args.pacing, duration=args.duration, zeta=args.zeta, alpha=args.alpha,
                      player=args.player, domain_id=args.domain_id,

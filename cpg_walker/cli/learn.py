@@ -1,6 +1,6 @@
-"""`cpg-walker learn --out DIR [--oscillators N] [--no-config]`: learn the humanoid CPG from the
-recorded walk (paper Sec. III-A); write config/cpg_humanoid.yaml, DIR/cpg_humanoid.yaml, DIR/fig6.png
-and DIR/learn.json."""
+"""`cpg-walker learn --out DIR [--oscillators N] [--install]`: learn the humanoid CPG from the recorded
+walk (paper Sec. III-A); write DIR/cpg_humanoid.yaml, DIR/fig6.png and DIR/learn.json (and, with
+--install, the packaged config/cpg_humanoid.yaml that cpg_node loads by default)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--oscillators", type=int, default=None, metavar="N",
                    help="oscillators per DOF (default: config/cpg_humanoid_learning.yaml)")
+    p.add_argument("--install", action="store_true",
+                   help="also replace the packaged config/cpg_humanoid.yaml (cpg_node's default file)")
     p.add_argument("--no-config", action="store_true",
-                   help="do not overwrite config/cpg_humanoid.yaml (the node's default)")
+                   help="(kept for old scripts; the packaged file is only written with --install)")
     p.set_defaults(func=_run)
 
 
@@ -24,7 +26,7 @@ def _run(args: argparse.Namespace) -> int:
 
     if args.oscillators is not None and args.oscillators < 1:
         raise ValueError(f"--oscillators must be >= 1, got {args.oscillators}")
-    r = run_learn(args.out, args.oscillators, keep_config=not args.no_config)
+    r = run_learn(args.out, args.oscillators, install=args.install)
     keys = ("gait_frequency_hz", "recorded_gait_frequency_hz", "max_rms_error_deg", "n_oscillators",
             "converged", "strides_learned", "learning_wall_time_s")
     print(json.dumps({k: r[k] for k in keys}))

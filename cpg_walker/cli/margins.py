@@ -17,8 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     import json
 
-    from cpg_walker.cli.progress import Progress
     from cpg_walker.experiments.replay_margins import QUICK, SWEEPS, run_margins
+    from cpg_walker.progress import Progress
 
     if not args.duration > 0:
         raise ValueError(f"--duration must be positive, got {args.duration}")

@@ -1,5 +1,5 @@
 """`cpg-walker param list|get|set NODE [NAME] [VALUE]`: `ros2 param` without ros2cli, through the node's
-real parameter services on the domain in ROS_DOMAIN_ID (core: cpg_walker.rostools)."""
+real parameter services on the domain in ROS_DOMAIN_ID (core: cpg_walker.nodes.rostools)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from cpg_walker import rostools as rt
+    from cpg_walker.nodes import rostools as rt
 
     try:
         with rt.Session("cpg_walker_param") as s:

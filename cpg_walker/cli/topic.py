@@ -1,5 +1,5 @@
 """`cpg-walker topic list | echo TOPIC | hz TOPIC`: `ros2 topic` without ros2cli, on the domain in
-ROS_DOMAIN_ID, generic over the message types discovered from the graph (core: cpg_walker.rostools)."""
+ROS_DOMAIN_ID, generic over the message types discovered from the graph (core: cpg_walker.nodes.rostools)."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _list(args: argparse.Namespace) -> int:
-    from cpg_walker import rostools as rt
+    from cpg_walker.nodes import rostools as rt
 
     with rt.Session("cpg_walker_topic") as s:
         topics = rt.topic_types(s, timeout=args.wait)
@@ -47,7 +47,7 @@ def _list(args: argparse.Namespace) -> int:
 
 
 def _echo(args: argparse.Namespace) -> int:
-    from cpg_walker import rostools as rt
+    from cpg_walker.nodes import rostools as rt
 
     count = 1 if args.once else args.count
     if count is not None and count < 1:
@@ -64,7 +64,7 @@ def _echo(args: argparse.Namespace) -> int:
 
 
 def _hz(args: argparse.Namespace) -> int:
-    from cpg_walker import rostools as rt
+    from cpg_walker.nodes import rostools as rt
 
     rt.RateMeter(args.window)  # validates --window before joining the graph
     try:

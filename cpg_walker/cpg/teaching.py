@@ -264,7 +264,7 @@ def learn(
     """Integrate the learning network for `duration` s; `teach(times)` -> (len(times), B) P_teach.
 
     The teaching signal is evaluated in chunks at the RK4 stage times (t, t + dt/2, t + dt).
-    `progress` is a cpg_walker.cli.progress.Progress (or None)."""
+    `progress` is a cpg_walker.progress.Progress (or None)."""
     if not np.isfinite(duration) or duration <= 0:
         raise ValueError(f"learning duration must be > 0, got {duration}")
     net.check_step(dt)

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cpg_walker.nodes.runtime import PACINGS
+
 
 def _node_stats(log: str) -> dict:
     m = re.findall(r"stats (\{.*\})", log)
@@ -82,8 +84,8 @@ def per_period_costs(n: int = 1000) -> dict:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from cpg_walker.graph import random_domain_id
     from cpg_walker.nodes import sim_node
+    from cpg_walker.nodes.graph import random_domain_id
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     rclpy.init(domain_id=random_domain_id(), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
@@ -130,7 +132,7 @@ def run(quick: bool = False) -> dict:
         "baseline_inprocess": inprocess_baseline(d),
         "per_period_costs": per_period_costs(300 if quick else 1000),
     }
-    for pacing in ("realtime", "fast", "lockstep"):
+    for pacing in PACINGS:
         result[pacing] = graph_run(pacing, d, work=work)
     result["lockstep_walk_3_nodes"] = graph_run("lockstep", d, "target_player_node", work=work)
     result["realtime_walk_3_nodes"] = graph_run("realtime", d, "target_player_node", work=work)

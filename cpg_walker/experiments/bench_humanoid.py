@@ -14,9 +14,9 @@ import time
 
 import numpy as np
 
-from cpg_walker.cpg.humanoid import HumanoidCPG
 from cpg_walker.cpg.network import CPGNetwork
-from cpg_walker.experiments.learn import learning_settings
+from cpg_walker.walker.controller import HumanoidCPG
+from cpg_walker.walker.learning import learning_settings
 
 
 def _median_us(fn, n: int, repeats: int) -> float:

@@ -8,10 +8,10 @@ import time
 
 import numpy as np
 
-from cpg_walker.experiments.replay import run_replay
 from cpg_walker.robot.gait_data import GaitPlayback, load_gait
 from cpg_walker.robot.hoap2 import Hoap2Sim
 from cpg_walker.robot.pid import PidLaw, load_pid_config
+from cpg_walker.walker.loop import run_replay
 
 
 def _step_cost_us(sim: Hoap2Sim, steps: int) -> float:

@@ -15,38 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cpg_walker.cpg.feedback import FeedbackController, FeedbackGaitSource
-from cpg_walker.cpg.humanoid import CPGGaitSource, HumanoidCPG
-from cpg_walker.experiments.replay import run_replay, summarize
-
-DEFAULT_CPG_FILE = "cpg_humanoid.yaml"
-
-
-def load_controller(cpg_file: str | None, n_oscillators: int | None = None) -> tuple[HumanoidCPG, str]:
-    """The learned controller: `cpg_file`, else config/cpg_humanoid.yaml if it has the requested N,
-    else learn now (`n_oscillators`, default settings). Returns (controller, where it came from)."""
-    from cpg_walker.cpg.humanoid import HumanoidSettings
-    from cpg_walker.experiments.learn import learning_settings
-
-    if cpg_file is not None:
-        ctrl = HumanoidCPG.load(cpg_file)
-        if n_oscillators is not None and ctrl.net.N != n_oscillators:
-            raise ValueError(
-                f"{cpg_file} has {ctrl.net.N} oscillators per DOF, --oscillators asks {n_oscillators}")
-        return ctrl, str(cpg_file)
-    try:
-        from cpg_walker.paths import config_path
-
-        path = config_path(DEFAULT_CPG_FILE)
-        ctrl = HumanoidCPG.load(path)
-        if n_oscillators is None or ctrl.net.N == n_oscillators:
-            return ctrl, str(path)
-    except FileNotFoundError:
-        pass
-    settings, params = learning_settings(n_oscillators)
-    ctrl, _ = HumanoidCPG.learn(settings=settings, params=params)
-    assert isinstance(settings, HumanoidSettings)
-    return ctrl, f"learned at start-up (N = {ctrl.net.N})"
+from cpg_walker.walker.controller import HumanoidCPG
+from cpg_walker.walker.feedback import FeedbackController
+from cpg_walker.walker.gait_source import CPGGaitSource, FeedbackGaitSource
+from cpg_walker.walker.learning import load_controller
+from cpg_walker.walker.loop import run_replay, summarize
 
 
 def walk(ctrl: HumanoidCPG, duration: float, zeta: float = 1.0, alpha: float = 1.0,
@@ -123,9 +96,10 @@ def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float = 1.0, alpha:
                  pathways: tuple[str, ...] | None = None) -> dict:
     """`cpg-walker cpg-walk`: walk, write DIR/walk.json and DIR/filmstrip.png. `pathways` (None = no
     feedback) closes those feedback pathways with config/feedback.yaml."""
-    from cpg_walker.cli.progress import Progress
+    from cpg_walker.progress import Progress
 
-    ctrl, origin = load_controller(cpg_file, n_oscillators)
+    load = load_controller(cpg_file, n_oscillators) if cpg_file else _default_controller(n_oscillators)
+    ctrl, origin, _ = load
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     grabber = None
@@ -137,7 +111,7 @@ def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float = 1.0, alpha:
     progress = Progress(duration, f"cpg-walk N={ctrl.net.N}", enabled=progress_enabled)
     fb = None
     if pathways is not None:
-        from cpg_walker.cpg.feedback import FeedbackConfig
+        from cpg_walker.walker.feedback import FeedbackConfig
 
         fb = FeedbackController(FeedbackConfig.load(), pathways)
     m = walk(ctrl, duration, zeta, alpha, transition, blend_s, schedule=schedule, on_log=grabber,
@@ -156,3 +130,11 @@ def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float = 1.0, alpha:
         grabber.close()
     (out / "walk.json").write_text(json.dumps(m, indent=2) + "\n")
     return m
+
+
+def _default_controller(n_oscillators: int | None) -> tuple[HumanoidCPG, str, bool]:
+    """The packaged learned CPG if it has the requested N, else learn one with that N now."""
+    ctrl, origin, converged = load_controller()
+    if n_oscillators is None or ctrl.net.N == n_oscillators:
+        return ctrl, origin, converged
+    return load_controller(None, n_oscillators)

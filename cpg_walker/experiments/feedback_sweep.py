@@ -13,8 +13,9 @@ import json
 import time
 from pathlib import Path
 
-from cpg_walker.cpg.feedback import PATHWAYS, FeedbackConfig, FeedbackController
-from cpg_walker.experiments.cpg_walk import load_controller, walk
+from cpg_walker.experiments.cpg_walk import walk
+from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig, FeedbackController
+from cpg_walker.walker.learning import load_controller
 
 ZETAS = (0.8, 1.0, 1.1, 1.2, 1.3, 1.5)
 #: condition name -> (pathways, config overrides); "off" = open loop (no observe at all)
@@ -45,7 +46,7 @@ def calibrate(ctrl) -> dict:
 
 def run_sweep(out_dir: str, zetas=ZETAS, conditions: list[str] | None = None, duration: float = 40.0,
               do_calibrate: bool = False, log=print) -> dict:
-    ctrl, origin = load_controller(None)
+    ctrl, origin, _ = load_controller()
     conds = conditions or list(CONDITIONS)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

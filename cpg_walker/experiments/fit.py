@@ -51,7 +51,7 @@ def fit_signal(
     free_run_internal: float | None = None,
 ) -> FitResult:
     """Learn `values` (n,) or (n, B) sampled at times `t` (s); returns the frozen network and metrics."""
-    from cpg_walker.cli.progress import Progress
+    from cpg_walker.progress import Progress
 
     cfg = cfg or load_config()
     fc = cfg["fit"]

@@ -1,7 +1,8 @@
 """`cpg-walker learn`: learn the humanoid CPG from the recorded walk (paper Sec. III-A) and draw Fig 6.
 
-Writes config/cpg_humanoid.yaml (the node's default; unless `keep_config=False`), DIR/cpg_humanoid.yaml,
-DIR/fig6.png (learned vs recorded trajectories of the 10 DOFs) and DIR/learn.json.
+Writes DIR/cpg_humanoid.yaml, DIR/fig6.png (learned vs recorded trajectories of the 10 DOFs) and
+DIR/learn.json; with ``install=True`` (``--install``) it also replaces the packaged config/cpg_humanoid.yaml,
+the file cpg_node loads by default.
 
 Fig 6 and the RMS errors are measured on the *frozen* network running freely (no teaching input) from
 its state at the teaching cycle's phase 0, over `figure.strides` strides, against the recorded steady
@@ -15,40 +16,11 @@ import math
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from cpg_walker.cpg.humanoid import CHAIN, DOFS, HumanoidCPG, HumanoidSettings, teaching_cycle
-from cpg_walker.cpg.network import CPGParams
-from cpg_walker.paths import config_path, share_dir
+from cpg_walker.paths import share_dir
 from cpg_walker.robot.joints import paper_name
-
-LEARNING_CONFIG = "cpg_humanoid_learning.yaml"
-OUTPUT_NAME = "cpg_humanoid.yaml"
-
-
-def load_learning_config() -> dict:
-    with open(config_path(LEARNING_CONFIG), encoding="utf-8") as fh:
-        cfg = yaml.safe_load(fh)
-    if not isinstance(cfg, dict) or "humanoid" not in cfg or "cpg" not in cfg:
-        raise ValueError(f"{config_path(LEARNING_CONFIG)}: expected 'cpg' and 'humanoid' sections")
-    return cfg
-
-
-def learning_settings(n_oscillators: int | None = None, cfg: dict | None = None) -> tuple[HumanoidSettings,
-                                                                                           CPGParams]:
-    """HumanoidSettings and CPGParams from config/cpg_humanoid_learning.yaml (N overridable)."""
-    cfg = cfg or load_learning_config()
-    h = dict(cfg["humanoid"])
-    if n_oscillators is not None:
-        h["n_oscillators"] = n_oscillators
-    fields = HumanoidSettings.__dataclass_fields__
-    unknown = sorted(set(h) - set(fields))
-    if unknown:
-        raise ValueError(f"{LEARNING_CONFIG}: unknown humanoid setting(s) {unknown}")
-    settings = HumanoidSettings(**{k: (int(v) if fields[k].type == "int" else float(v))
-                                   for k, v in h.items()})
-    params = CPGParams(**{k: float(v) for k, v in cfg["cpg"].items()}, amplitude_time_constant=0.0)
-    return settings, params
+from cpg_walker.walker.controller import CHAIN, DOFS, HumanoidCPG, teaching_cycle
+from cpg_walker.walker.learning import DEFAULT_CPG_FILE, learning_settings, load_learning_config
 
 
 def free_run_errors(ctrl: HumanoidCPG, strides: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -97,9 +69,9 @@ def plot_fig6(t: np.ndarray, Q: np.ndarray, P: np.ndarray, rms_deg: np.ndarray, 
     return path
 
 
-def run_learn(out_dir: str, n_oscillators: int | None = None, keep_config: bool = True,
+def run_learn(out_dir: str, n_oscillators: int | None = None, install: bool = False,
               progress_enabled: bool = True) -> dict:
-    from cpg_walker.cli.progress import Progress
+    from cpg_walker.progress import Progress
 
     cfg = load_learning_config()
     settings, params = learning_settings(n_oscillators, cfg)
@@ -110,9 +82,9 @@ def run_learn(out_dir: str, n_oscillators: int | None = None, keep_config: bool 
     ctrl, rep = HumanoidCPG.learn(cfg.get("gait", "walk"), settings, params, progress=progress)
     progress.total = float(rep.strides)  # the bar ends where learning stopped
     progress.close("converged" if rep.converged else "budget spent, NOT converged")
-    written = [ctrl.save(out / OUTPUT_NAME)]
-    if keep_config:
-        written.append(ctrl.save(share_dir() / "config" / OUTPUT_NAME))
+    written = [ctrl.save(out / DEFAULT_CPG_FILE)]
+    if install:
+        written.append(ctrl.save(share_dir() / "config" / DEFAULT_CPG_FILE))
     strides = int(cfg.get("figure", {}).get("strides", 3))
     t, Q, P, measured = free_run_errors(ctrl, strides)
     rms = np.degrees(np.sqrt(np.mean((Q - P) ** 2, axis=0)))
@@ -127,7 +99,7 @@ def run_learn(out_dir: str, n_oscillators: int | None = None, keep_config: bool 
         "gait_frequency_hz": learned_hz,
         "recorded_gait_frequency_hz": rec_hz,
         "gait_frequency_error_rel": learned_hz / rec_hz - 1.0,
-        "free_run_gait_frequency_hz": measured,
+        "free_run_gait_frequency_hz": measured if math.isfinite(measured) else None,
         "rms_error_deg": {j: round(float(r), 4) for j, r in zip(DOFS, rms, strict=True)},
         "rms_error_deg_by_paper_name": {paper_name(j): round(float(r), 4)
                                         for j, r in zip(DOFS, rms, strict=True)},
@@ -150,7 +122,5 @@ def run_learn(out_dir: str, n_oscillators: int | None = None, keep_config: bool 
         "last_chunks": rep.history[-3:],
         "files": {"yaml": [str(p) for p in written], "figure": str(fig)},
     }
-    (out / "learn.json").write_text(json.dumps(report, indent=2) + "\n")
-    if not math.isfinite(measured):
-        report["free_run_gait_frequency_hz"] = None
+    (out / "learn.json").write_text(json.dumps(report, indent=2, allow_nan=False) + "\n")
     return report

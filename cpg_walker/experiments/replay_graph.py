@@ -3,7 +3,7 @@
 target_player_node streams the recording as /joint_targets on every /clock tick, pid_node closes the loop
 over /joint_states -> /joint_torques, sim_node steps the HOAP-2 and records the run (base pose, heading,
 sole loads every 10 ms of sim time). The record is summarised by the in-process replay's code
-(experiments/replay.py), so replay.json has the same keys, plus ``real_time_factor`` and a ``graph``
+(walker/loop.py), so replay.json has the same keys, plus ``real_time_factor`` and a ``graph``
 section (pacing, latency, CPU per node).
 
 ``run_graph`` / ``GraphRun.report`` are the shared part: start sim_node + pid_node + a target node with
@@ -20,20 +20,20 @@ from pathlib import Path
 
 import numpy as np
 
-PACINGS = ("realtime", "fast", "lockstep")
+from cpg_walker.nodes.runtime import PACINGS
 
 
-def record_to_result(record, touchdown_from_loads: bool = True):
+def record_to_result(record):
     """A sim_node RunRecord as the in-process ReplayResult (contact events from the logged loads)."""
-    from cpg_walker.experiments.replay import CONTACT_ON_N, ReplayResult, _contact_events
+    from cpg_walker.robot.contact import TouchdownDetector
+    from cpg_walker.walker.loop import ReplayResult
 
     t = np.asarray(record.t)
     loads = np.asarray(record.loads)
-    events: dict[str, list[float]] = {"left": [], "right": []}
-    if len(t):
-        contact = [(loads[0][0] > CONTACT_ON_N, None), (loads[0][1] > CONTACT_ON_N, None)]
-        for ti, li in zip(t, loads, strict=True):
-            _contact_events((float(li[0]), float(li[1])), contact, float(ti), events)
+    touch = TouchdownDetector()
+    for ti, li in zip(t, loads, strict=True):
+        touch.update(float(ti), (float(li[0]), float(li[1])))
+    events = touch.events
     return ReplayResult(
         t=t, base_xy=np.asarray(record.base_xy), base_z=np.asarray(record.base_z),
         heading=np.unwrap(np.asarray(record.heading)), loads=loads, touchdowns=events,
@@ -46,7 +46,7 @@ def record_to_result(record, touchdown_from_loads: bool = True):
 class GraphRun:
     """One finished run of the graph: the sim's record, wall time, CPU seconds and log of every node."""
 
-    record: object  # nodes.sim_core.RunRecord
+    record: object  # robot.run_record.RunRecord
     target: str | None
     pacing: str
     control_period: float
@@ -57,8 +57,8 @@ class GraphRun:
     def report(self, period_s: float | None) -> tuple[dict, object]:
         """replay.json's keys (``summarize`` of the record, stride ``period_s``), ``real_time_factor``,
         touchdowns, control, mass and the ``graph`` section; and the ReplayResult."""
-        from cpg_walker.experiments.replay import summarize
         from cpg_walker.robot.hoap2 import Hoap2Sim
+        from cpg_walker.walker.loop import summarize
 
         result = record_to_result(self.record)
         stats = self.record.stats
@@ -99,8 +99,8 @@ def run_graph(
     The sim records the run to ``work_dir/<tag>_record.json``; node logs go to ``work_dir/<tag>_logs``.
     pid_node answers in lockstep when the sim does and waits for targets when there is a target node
     (``pid_params`` override). Raises RuntimeError (with the sim's log tail) if the sim fails."""
-    from cpg_walker.graph import Graph
-    from cpg_walker.nodes.sim_core import RunRecord
+    from cpg_walker.nodes.graph import Graph
+    from cpg_walker.robot.run_record import RunRecord
 
     if pacing not in PACINGS:
         raise ValueError(f"pacing must be realtime, fast or lockstep, got {pacing!r}")
@@ -139,7 +139,7 @@ def run_graph_replay(
     timeout: float | None = None,
 ) -> dict:
     """Replay a recording through sim_node + pid_node + target_player_node; write ``replay.json``."""
-    from cpg_walker.experiments.replay import recording_setup
+    from cpg_walker.walker.loop import recording_setup
 
     if pacing not in PACINGS:
         raise ValueError(f"pacing must be realtime, fast or lockstep, got {pacing!r}")

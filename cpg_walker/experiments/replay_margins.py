@@ -10,10 +10,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from cpg_walker.experiments.replay import run_replay
 from cpg_walker.robot.gait_data import GaitPlayback, load_gait
 from cpg_walker.robot.hoap2 import Hoap2Sim, load_sim_config
 from cpg_walker.robot.pid import PidLaw, load_pid_config
+from cpg_walker.walker.loop import run_replay
 
 SWEEPS: dict[str, list[float]] = {
     "kp": [40, 60, 80, 100, 130, 160, 200, 250, 300],

@@ -22,7 +22,7 @@ def p_teach(t: np.ndarray) -> np.ndarray:
 
 def run_fig2(cfg: dict, progress: bool = True) -> tuple[CPGNetwork, dict, dict]:
     """Learn P_teach with the paper's set-up; returns the frozen network, numbers, and curves."""
-    from cpg_walker.cli.progress import Progress
+    from cpg_walker.progress import Progress
 
     c = cfg["fig2"]
     lo, hi = c["omega0_range"]
@@ -205,7 +205,7 @@ def truncation_error(cfg: dict, n_components: int) -> float:
 def run_sweep(cfg: dict, progress: bool = True) -> list[dict]:
     """Smoothed square wave learned with N = 2..12 oscillators (the fit path: seeded at the periodogram's
     components, strongest first; see teaching.py) — free-run error versus N."""
-    from cpg_walker.cli.progress import Progress
+    from cpg_walker.progress import Progress
 
     c = cfg["beyond"]
     t, v = smoothed_square(cfg)
@@ -248,7 +248,7 @@ def run_fewer(cfg: dict, progress: bool = True) -> dict:
     """Fewer oscillators than components, blind as in the paper: 2 oscillators, ω(0) spread uniformly
     (the paper's rule: linspace(6, 70, 2)) and `trials` − 1 further spreads drawn uniformly from [6, 70];
     all trials are B independent CPGs of one batched network learning Fig 2's signal."""
-    from cpg_walker.cli.progress import Progress
+    from cpg_walker.progress import Progress
 
     c = cfg["fewer"]
     lo, hi = cfg["fig2"]["omega0_range"]

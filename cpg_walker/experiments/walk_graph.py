@@ -13,15 +13,15 @@ import json
 import math
 from pathlib import Path
 
-DEFAULT_CPG_FILE = "cpg_humanoid.yaml"
+from cpg_walker.walker.learning import DEFAULT_CPG_FILE
 
 
 def check_modulation(zeta: float, alpha: float) -> None:
     """The cpg_node's ranges, checked before any process starts."""
-    from cpg_walker.nodes.cpg_node import validate_modulation
+    from cpg_walker.walker.controller import modulation_error
 
     for name, value in (("zeta", zeta), ("alpha", alpha)):
-        reason = validate_modulation(name, value)
+        reason = modulation_error(name, value)
         if reason:
             raise ValueError(reason)
 
@@ -38,9 +38,9 @@ def run_graph_walk(
     timeout: float | None = None,
 ) -> dict:
     """Walk through sim_node + pid_node + cpg_node; write ``walk.json``; return its content."""
-    from cpg_walker.cpg.humanoid import HumanoidCPG
-    from cpg_walker.experiments.replay_graph import PACINGS, run_graph
-    from cpg_walker.paths import config_path
+    from cpg_walker.experiments.replay_graph import run_graph
+    from cpg_walker.nodes.runtime import PACINGS
+    from cpg_walker.walker.learning import load_controller
 
     if pacing not in PACINGS:
         raise ValueError(f"pacing must be realtime, fast or lockstep, got {pacing!r}")
@@ -50,11 +50,8 @@ def run_graph_walk(
     learn_now = not cpg_file
     ctrl = None
     if not learn_now:  # fail early, in this process, on a missing or corrupt file
-        path = Path(cpg_file)
-        if not path.is_file() and not path.is_absolute() and len(path.parts) == 1:
-            path = config_path(cpg_file)
-        ctrl = HumanoidCPG.load(path)
-        cpg_file = str(path.resolve())
+        ctrl, origin, _ = load_controller(cpg_file)
+        cpg_file = str(Path(origin).resolve())
     out = Path(out_dir)
     limit = timeout if timeout is not None else 60.0 + duration * 5.0 + (600.0 if learn_now else 0.0)
     run = run_graph(out, "cpg_node", {"cpg_file": cpg_file, "zeta": float(zeta), "alpha": float(alpha)},

@@ -11,9 +11,8 @@ from __future__ import annotations
 import math
 
 from cpg_walker.nodes.runtime import float_param, int_param, parse_cli, plain_param, run_main
+from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE, modulation_error
 
-ZETA_RANGE = (-2.0, 2.0)
-ALPHA_RANGE = (0.0, 2.0)
 STATE_FIELDS = ("phase_rad", "frequency_hz", "amplitude_rad")
 
 INTERFACE = """\
@@ -29,18 +28,6 @@ publishes:
     state (learning | converged | starting | walking), zeta, alpha (commanded and applied), N, overruns
 parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N when learning),
   zeta [-2, 2] and alpha [0, 2] (settable at run time), lookahead, monitor_period (sim s)"""
-
-
-def validate_modulation(name: str, value: object) -> str | None:
-    """Why ``value`` is not acceptable for ``zeta``/``alpha`` (None if it is)."""
-    lo, hi = ZETA_RANGE if name == "zeta" else ALPHA_RANGE
-    if isinstance(value, bool) or not isinstance(value, float | int):
-        return f"{name} must be a number (double), got {type(value).__name__} {value!r}"
-    if not math.isfinite(float(value)):
-        return f"{name} must be finite, got {value!r}"
-    if not lo <= float(value) <= hi:
-        return f"{name} must be in [{lo:g}, {hi:g}], got {value!r}"
-    return None
 
 
 def state_layout(names, n_osc: int):
@@ -77,10 +64,12 @@ def _make_node():
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from cpg_walker.cpg.humanoid import CPGGaitSource, HumanoidCPG
     from cpg_walker.nodes.messages import JointStateBuilder, darray, stamp
     from cpg_walker.nodes.runtime import ActivityStats, HotPath, TickStats, exit_log
     from cpg_walker.nodes.validation import to_ns
+    from cpg_walker.walker.controller import HumanoidCPG
+    from cpg_walker.walker.gait_source import CPGGaitSource
+    from cpg_walker.walker.learning import load_controller
 
     class CPGNode(Node):
         def __init__(self) -> None:
@@ -100,7 +89,7 @@ def _make_node():
                                                  0.002, 60.0, read_only=True))
             g = self.get_parameter
             for name in ("zeta", "alpha"):
-                reason = validate_modulation(name, g(name).value)
+                reason = modulation_error(name, g(name).value)
                 if reason:
                     raise ValueError(reason)
             self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -131,26 +120,12 @@ def _make_node():
 
         def _controller(self, cpg_file: str, n: int) -> tuple[HumanoidCPG, str, bool]:
             if not cpg_file:
-                from cpg_walker.experiments.learn import learning_settings
-
                 self._diagnostics(0)
                 self.get_logger().info(f"learning the CPG (N={n}) at start-up ...")
-                settings, params = learning_settings(n)
-                ctrl, report = HumanoidCPG.learn(settings=settings, params=params)
-                origin = f"learned at start-up (N={n}, {report.wall_time_s:.1f} s)"
-                return ctrl, origin, bool(report.converged)
-            from pathlib import Path
-
-            from cpg_walker.paths import config_path
-
-            path = Path(cpg_file)
-            if not path.is_file() and not path.is_absolute() and len(path.parts) == 1:
-                path = config_path(cpg_file)
             try:
-                ctrl = HumanoidCPG.load(path)  # ValueError naming the file and the bad field if corrupt
+                return load_controller(cpg_file, n if not cpg_file else None)
             except FileNotFoundError as exc:
                 raise ValueError(str(exc)) from None
-            return ctrl, str(path), bool(ctrl.meta.get("learning", {}).get("converged", True))
 
         def _warm_up(self) -> None:
             """Step a copy of the CPG (with the modulation filters moving) a few times: compiled kernels
@@ -173,7 +148,7 @@ def _make_node():
             changes = {}
             for prm in params:
                 if prm.name in ("zeta", "alpha"):
-                    reason = validate_modulation(prm.name, prm.value)
+                    reason = modulation_error(prm.name, prm.value)
                     if reason:
                         return SetParametersResult(successful=False, reason=reason)
                     changes[prm.name] = float(prm.value)

@@ -8,6 +8,9 @@ from collections.abc import Callable
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
+#: sim_node's pacings: wall-clock schedule, as fast as possible, or one period per controller answer.
+PACINGS = ("realtime", "fast", "lockstep")
+
 
 def parse_cli(prog: str, description: str, interface: str, argv: list[str] | None = None) -> list[str]:
     """Handle ``--help`` (prints ``interface``) over the non-ROS arguments; return argv for rclpy.init."""
@@ -261,3 +264,14 @@ def int_param(description: str, lo: int, hi: int, read_only: bool = False) -> Pa
 
 def plain_param(description: str, read_only: bool = False) -> ParameterDescriptor:
     return ParameterDescriptor(description=description, read_only=read_only)
+
+
+def latency_summary(samples_s: list[float]) -> dict:
+    """p50/p99/max of latencies (s) in milliseconds, with the count."""
+    if not samples_s:
+        return {"count": 0}
+    import numpy as np
+
+    a = np.asarray(samples_s) * 1e3
+    return {"count": int(a.size), "p50_ms": round(float(np.percentile(a, 50)), 4),
+            "p99_ms": round(float(np.percentile(a, 99)), 4), "max_ms": round(float(a.max()), 4)}

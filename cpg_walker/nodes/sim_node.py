@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from cpg_walker.nodes.runtime import float_param, parse_cli, plain_param, run_main
+from cpg_walker.nodes.runtime import PACINGS, float_param, parse_cli, plain_param, run_main
 
 INTERFACE = """\
 publishes: /clock (rosgraph_msgs/Clock), /joint_states (sensor_msgs/JointState: position, velocity,
@@ -26,7 +26,6 @@ parameters: pacing (realtime|fast|lockstep), control_period (s, 0.002), real_tim
   odom_period, diagnostics_period (sim s), imu_variance_floor, push.force [N,N,N], push.body,
   push.duration (s), record_path, record_period (s)"""
 
-PACINGS = ("realtime", "fast", "lockstep")
 
 
 def _make_node():
@@ -51,11 +50,13 @@ def _make_node():
         read_joint_command,
         stamp_ns,
     )
-    from cpg_walker.nodes.runtime import HotPath, Throttle, exit_log
-    from cpg_walker.nodes.sim_core import Pusher, RunRecord, latency_summary, sole_wrenches
+    from cpg_walker.nodes.runtime import HotPath, Throttle, exit_log, latency_summary
     from cpg_walker.nodes.validation import check_finite_scalar, period_ns, reason_key
+    from cpg_walker.robot.contact import sole_wrenches
     from cpg_walker.robot.hoap2 import Hoap2Sim
     from cpg_walker.robot.joints import JOINT_NAMES
+    from cpg_walker.robot.pusher import Pusher
+    from cpg_walker.robot.run_record import RunRecord
 
     class SimNode(Node):
         """Wires parameters, topics and services to a Hoap2Sim; ``run`` is the paced loop."""

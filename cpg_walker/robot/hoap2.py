@@ -32,6 +32,23 @@ class Imu:
     accel: np.ndarray
     quat: np.ndarray
 
+    def tilt(self) -> tuple[float, float]:
+        """(lateral roll, sagittal pitch) of the chest in rad, see ``tilt_from_quat``."""
+        return tilt_from_quat(self.quat)
+
+
+def tilt_from_quat(q: Sequence[float] | np.ndarray) -> tuple[float, float]:
+    """(lateral roll, sagittal pitch) in rad from an orientation quaternion (w, x, y, z) of the chest, with
+    the heading (yaw) removed: roll > 0 = leaning right (left side up), pitch > 0 = leaning forward — the
+    paper's lateral and sagittal tilt. A ROS node computes it from /imu's orientation."""
+    w, x, y, z = (float(v) for v in q)
+    r00, r10 = 1 - 2 * (y * y + z * z), 2 * (x * y + w * z)  # rotation matrix column 0 (x-axis)
+    up = (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))  # column 2 (z-axis)
+    yaw = math.atan2(r10, r00)
+    c, s = math.cos(yaw), math.sin(yaw)
+    fx, fy = c * up[0] + s * up[1], -s * up[0] + c * up[1]
+    return math.atan2(-fy, up[2]), math.atan2(fx, up[2])
+
 
 def load_sim_config(path: str | Path | None = None) -> dict:
     """``config/sim.yaml`` (or the given file) as a dict."""
@@ -198,10 +215,6 @@ class Hoap2Sim:
         """Joint velocities (rad/s)."""
         return self.data.qvel[self._select(self._dadr, names)].copy()
 
-    def joint_efforts(self, names: Sequence[str] | None = None) -> np.ndarray:
-        """Motor torques (N*m) applied in the last step."""
-        return self.data.actuator_force[self._select(self._act, names)].copy()
-
     def _select(self, addresses: np.ndarray, names: Sequence[str] | None) -> np.ndarray:
         if names is None:
             return addresses
@@ -219,17 +232,6 @@ class Hoap2Sim:
         """Chest IMU: gyro (rad/s) and accelerometer (m/s^2, reads +9.81 on z standing still) in the torso
         frame, orientation quaternion (w, x, y, z) in the world."""
         return Imu(self._read("imu_gyro"), self._read("imu_accel"), self._read("imu_quat"))
-
-    def torso_tilt(self) -> tuple[float, float]:
-        """(lateral roll, sagittal pitch) of the torso in rad; roll > 0 = leaning right (left side up),
-        pitch > 0 = leaning forward (the paper's lateral and sagittal tilt)."""
-        R = self.data.xmat[self._torso].reshape(3, 3)
-        up = R[:, 2]  # torso z-axis in the world
-        # express the up-vector in the heading frame (yaw removed)
-        yaw = math.atan2(R[1, 0], R[0, 0])
-        c, s = math.cos(yaw), math.sin(yaw)
-        fx, fy = c * up[0] + s * up[1], -s * up[0] + c * up[1]
-        return math.atan2(-fy, up[2]), math.atan2(fx, up[2])
 
     def torso_upright(self) -> float:
         """Cosine of the angle between the torso's z-axis and the vertical (1 = upright)."""
@@ -253,10 +255,6 @@ class Hoap2Sim:
         """Yaw of the torso's x-axis in the world (rad)."""
         R = self.data.xmat[self._torso].reshape(3, 3)
         return math.atan2(R[1, 0], R[0, 0])
-
-    def com_position(self) -> np.ndarray:
-        """Whole-body centre of mass (m, world)."""
-        return self.data.subtree_com[self._torso].copy()
 
     def has_fallen(self) -> bool:
         """Fallen = torso origin lower than ``fall.min_torso_height`` (standing crouch: 0.285 m) or the

@@ -59,7 +59,7 @@ import numpy as np
 import yaml
 
 from cpg_walker.cpg.network import CPGNetwork, CPGParams
-from cpg_walker.robot.joints import CONTROLLED_JOINTS, JOINT_NAMES, PAPER_LEG_DOFS, SIDES
+from cpg_walker.robot.joints import CONTROLLED_JOINTS, PAPER_LEG_DOFS, SIDES
 
 SCHEMA_VERSION = 1
 DOFS: tuple[str, ...] = CONTROLLED_JOINTS
@@ -80,28 +80,58 @@ CHAIN: tuple[tuple[int, int], ...] = tuple(
 HIP2_PAIR: tuple[int, int] = (_dof("l", "Hip2"), _dof("r", "Hip2"))
 LEG_PHASE = math.pi
 
+#: The commands' ranges (cpg_node's parameter descriptors, the CLI's checks, ``set_zeta``/``set_alpha``).
+ZETA_RANGE = (-2.0, 2.0)  # frequency ratio ζ; negative plays the gait backwards
+ALPHA_RANGE = (0.0, 2.0)  # amplitude (step length) scale α; 0 stops stepping
+
+
+def modulation_error(name: str, value: object) -> str | None:
+    """Why ``value`` is not an acceptable ``zeta``/``alpha`` command (None if it is)."""
+    lo, hi = ZETA_RANGE if name == "zeta" else ALPHA_RANGE
+    if isinstance(value, bool) or not isinstance(value, float | int):
+        return f"{name} must be a number (double), got {type(value).__name__} {value!r}"
+    if not math.isfinite(float(value)):
+        return f"{name} must be finite, got {value!r}"
+    if not lo <= float(value) <= hi:
+        return f"{name} must be in [{lo:g}, {hi:g}], got {value!r}"
+    return None
+
 
 @dataclass(frozen=True)
 class HumanoidSettings:
-    """Constants of the humanoid learning (values in config/cpg_humanoid_learning.yaml)."""
+    """Constants of the humanoid learning. Their values live in config/cpg_humanoid_learning.yaml (and in a
+    learned file's ``settings``), nowhere in code: build with ``from_mapping`` or walker.learning."""
 
-    n_oscillators: int = 10
-    reference_omega: float = 15.0  # internal rad/s of the gait's fundamental (Fig 2's lowest component)
-    normalised_rms: float = 4.0  # each DOF's teaching RMS in normalised units (Fig 2's signal: 1.39)
-    seed_factor: float = 0.97  # oscillator 0: ω(0) = seed_factor·ω_gait (the gait frequency is learned)
-    harmonic_seed_factor: float = 1.0  # oscillator i >= 1: ω(0) = harmonic_seed_factor·k_i·ω_gait
-    max_harmonic: int = 20  # harmonics considered when seeding oscillators 1..N−1
-    steps_per_fastest_period: float = 40.0  # learning dt: this many RK4 steps per fastest oscillator period
-    chunk_strides: int = 5  # convergence is checked every chunk
-    max_strides: int = 600  # learning budget
-    tol_omega: float = 1e-3  # max relative change of an active ω over a chunk
-    tol_alpha: float = 1e-2  # max change of an active α over a chunk, relative to its CPG's largest α
-    tol_phi: float = 1e-2  # max change (rad) of an active φ (eq 8) or inter-DOF φ (eq 13) over a chunk
-    tol_error: float = 1e-2  # max change of a DOF's RMS error over a chunk, relative to its teaching RMS
-    active_fraction: float = 0.02  # an oscillator is active if |α| >= this × its CPG's largest |α|
-    converged_chunks: int = 2  # consecutive chunks meeting every tolerance
-    modulation_time_constant: float = 0.25  # s, each of the 3 lags of the ζ/α command filter
-    control_dt: float = 0.002  # s, playback step of the target source (the PID rate)
+    n_oscillators: int
+    reference_omega: float  # internal rad/s of the gait's fundamental (Fig 2's lowest component)
+    normalised_rms: float  # each DOF's teaching RMS in normalised units (Fig 2's signal: 1.39)
+    seed_factor: float  # oscillator 0: ω(0) = seed_factor·ω_gait (the gait frequency is learned)
+    harmonic_seed_factor: float  # oscillator i >= 1: ω(0) = harmonic_seed_factor·k_i·ω_gait
+    max_harmonic: int  # harmonics considered when seeding oscillators 1..N−1
+    steps_per_fastest_period: float  # learning dt: this many RK4 steps per fastest oscillator period
+    chunk_strides: int  # convergence is checked every chunk
+    max_strides: int  # learning budget
+    tol_omega: float  # max relative change of an active ω over a chunk
+    tol_alpha: float  # max change of an active α over a chunk, relative to its CPG's largest α
+    tol_phi: float  # max change (rad) of an active φ (eq 8) or inter-DOF φ (eq 13) over a chunk
+    tol_error: float  # max change of a DOF's RMS error over a chunk, relative to its teaching RMS
+    active_fraction: float  # an oscillator is active if |α| >= this × its CPG's largest |α|
+    converged_chunks: int  # consecutive chunks meeting every tolerance
+    modulation_time_constant: float  # s, each of the 3 lags of the ζ/α command filter
+    control_dt: float  # s, playback step of the target source (the PID rate)
+
+    @classmethod
+    def from_mapping(cls, d: dict, where: str) -> HumanoidSettings:
+        """From a YAML mapping (every field, nothing else); ValueError naming ``where`` and the key."""
+        known = cls.__dataclass_fields__
+        unknown, missing = sorted(set(d) - set(known)), sorted(set(known) - set(d))
+        if unknown or missing:
+            raise ValueError(f"{where}: humanoid settings: unknown key(s) {unknown}, "
+                             f"missing key(s) {missing}")
+        try:
+            return cls(**{k: (int(v) if known[k].type == "int" else float(v)) for k, v in d.items()})
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{where}: humanoid settings: {exc}") from None
 
     def __post_init__(self) -> None:
         if not isinstance(self.n_oscillators, (int, np.integer)) or self.n_oscillators < 1:
@@ -157,7 +187,7 @@ def teaching_cycle(gait_name: str = "walk") -> TeachingCycle:
     return TeachingCycle(gait.name, float(cyc.start), float(n * gait.dt), q, gait.dt, spline)
 
 
-def initial_omegas(cycle: TeachingCycle, s: HumanoidSettings) -> np.ndarray:
+def harmonic_seed_omegas(cycle: TeachingCycle, s: HumanoidSettings) -> np.ndarray:
     """(10, N) internal ω(0): fundamental for oscillator 0, strongest harmonics k >= 2 for the rest."""
     mags = cycle.harmonics(s.max_harmonic)
     out = np.empty((B, s.n_oscillators))
@@ -221,8 +251,7 @@ class HumanoidCPG:
         self.couple_legs(self.net)
 
     @classmethod
-    def learn(cls, gait: str = "walk", settings: HumanoidSettings | None = None,
-              params: CPGParams | None = None,
+    def learn(cls, gait: str, settings: HumanoidSettings, params: CPGParams,
               progress: object | None = None) -> tuple[HumanoidCPG, LearnReport]:
         """Learn the 10 DOFs of the recording's steady stride (eqs 4–13) until converged; freeze.
 
@@ -234,15 +263,14 @@ class HumanoidCPG:
         the teaching cycle's phase 0 (stored as `phase_zero_state`)."""
         import time
 
-        s = settings or HumanoidSettings()
-        p = params or CPGParams()
-        p = CPGParams(p.mu, p.gamma, p.epsilon, p.eta, p.tau, 0.0)
+        s = settings
+        p = CPGParams(params.mu, params.gamma, params.epsilon, params.eta, params.tau, 0.0)
         cyc = teaching_cycle(gait)
         offset = cyc.q.mean(axis=0)
         rms = np.sqrt(np.mean((cyc.q - offset) ** 2, axis=0))
         gain = rms / s.normalised_rms
         c = cyc.omega / s.reference_omega
-        om0 = initial_omegas(cyc, s)
+        om0 = harmonic_seed_omegas(cyc, s)
         net = cls.build_network(om0, p, c, offset, gain)
         # The Hip2–Hip2 link is present while learning too: a locked coupling term τ·sin θ = τ·x/r also
         # pushes the radius (r² -> μ + τ/2γ), so α must be learned with the coupling that plays it back.
@@ -340,17 +368,17 @@ class HumanoidCPG:
 
     def set_zeta(self, zeta: float) -> None:
         """Command the frequency ratio ζ (negative = backwards); reached smoothly (C²)."""
-        z = float(zeta)
-        if not math.isfinite(z) or abs(z) > 3.0:
-            raise ValueError(f"zeta must be a finite number in [-3, 3], got {zeta!r}")
-        self.zeta_command = z
+        reason = modulation_error("zeta", zeta)
+        if reason:
+            raise ValueError(reason)
+        self.zeta_command = float(zeta)
 
     def set_alpha(self, alpha: float) -> None:
         """Command the amplitude (step-length) scale α >= 0 (0 stops stepping); reached smoothly (C²)."""
-        a = float(alpha)
-        if not math.isfinite(a) or a < 0 or a > 2.0:
-            raise ValueError(f"alpha must be a finite number in [0, 2], got {alpha!r}")
-        self.alpha_command = a
+        reason = modulation_error("alpha", alpha)
+        if reason:
+            raise ValueError(reason)
+        self.alpha_command = float(alpha)
 
     def set_modulation_state(self, zeta: float, alpha: float) -> None:
         """Apply ζ, α at once (filters settled): for start-up, not for changes while walking."""
@@ -541,16 +569,7 @@ def _from_dict(cls: type[HumanoidCPG], d: object, where: str) -> HumanoidCPG:
         raise ValueError(f"{where}.leg_coupling.pair: must be {[DOFS[i] for i in HIP2_PAIR]}")
     if float(_require(leg, "phase", f"{where}.leg_coupling", float)) != float(LEG_PHASE):
         raise ValueError(f"{where}.leg_coupling.phase: must be pi ({LEG_PHASE!r})")
-    st = _require(d, "settings", where, dict)
-    known = HumanoidSettings.__dataclass_fields__
-    unknown = sorted(set(st) - set(known))
-    if unknown:
-        raise ValueError(f"{where}.settings: unknown key(s) {unknown}")
-    try:
-        settings = HumanoidSettings(**{k: (int(v) if known[k].type == "int" else float(v))
-                                       for k, v in st.items()})
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{where}.settings: {exc}") from None
+    settings = HumanoidSettings.from_mapping(_require(d, "settings", where, dict), f"{where}.settings")
     if settings.n_oscillators != N:
         raise ValueError(f"{where}.settings.n_oscillators ({settings.n_oscillators}) != n_oscillators ({N})")
     teaching = _require(d, "teaching", where, dict)
@@ -579,112 +598,3 @@ def _from_dict(cls: type[HumanoidCPG], d: object, where: str) -> HumanoidCPG:
     net.freeze()
     phase_zero = np.stack([arrays["x0"], arrays["y0"]])
     return cls(net, {"teaching": teaching, "learning": learning}, phase_zero, settings)
-
-
-# --------------------------------------------------------------------------------------- target source
-class CPGGaitSource:
-    """A run_replay target source (``names`` = all 25 joints, ``targets(t)`` -> (q, q̇)) driven by the CPG.
-
-    Start-up transitions from the standing posture (the recording's first row):
-
-    * ``"recording"`` (default): play the recording's opening steps up to ``handover_s`` (default: the
-      teaching cycle's start, 5.616 s for the walk — the recorded steps from standing into the steady
-      gait), with the CPG started at the matching phase of the teaching cycle, then cross-fade from the
-      recording (continued in its steady cycle) to the CPG over ``blend_s`` (C² smootherstep weight).
-    * ``"standing"``: CPG from t = 0 at phase 0, its oscillating part faded in from α = 0 (the α filter)
-      and the offsets blended from the standing posture to the learned mean posture over ``blend_s``.
-
-    Joints the CPG does not control follow the recording until the hand-over, then hold the teaching
-    cycle's mean (hip yaw ≈ 0, arms at their mean, body, and head/hands at 0 as in the replay).
-    ``schedule``: list of (time_s, zeta, alpha) commands applied when t reaches time_s. With the
-    "recording" transition, `zeta`/`alpha` other than 1 are commanded when the cross-fade ends (the CPG
-    takes over the recording at the recording's pace first)."""
-
-    def __init__(self, ctrl: HumanoidCPG, transition: str = "recording", handover_s: float | None = None,
-                 blend_s: float = 1.0, schedule: list[tuple[float, float, float]] | None = None,
-                 zeta: float = 1.0, alpha: float = 1.0):
-        from cpg_walker.robot.gait_data import GaitPlayback, find_steady_cycle, load_gait
-
-        if transition not in ("recording", "standing"):
-            raise ValueError(f"unknown transition {transition!r}; use 'recording' or 'standing'")
-        if not (blend_s >= 0 and math.isfinite(blend_s)):
-            raise ValueError(f"blend_s must be >= 0, got {blend_s}")
-        self.ctrl = ctrl
-        self.names = JOINT_NAMES
-        self.transition = transition
-        gait = load_gait(ctrl.meta["teaching"]["gait"])
-        self.playback = GaitPlayback(gait, cycle=find_steady_cycle(gait))
-        self.standing = self.playback.standing_posture()
-        cyc_start = float(ctrl.meta["teaching"]["cycle_start_s"])
-        self.handover = cyc_start if handover_s is None else float(handover_s)
-        if transition == "standing":
-            self.handover = 0.0
-        if self.handover < 0:
-            raise ValueError(f"handover_s must be >= 0, got {handover_s}")
-        self.blend = float(blend_s)
-        self._idx = np.array([JOINT_NAMES.index(j) for j in DOFS])
-        i0 = round(cyc_start / gait.dt)
-        n = round(ctrl.period / gait.dt)
-        hold = np.zeros(len(JOINT_NAMES))
-        for j, name in enumerate(JOINT_NAMES):
-            if name in gait.names:
-                hold[j] = gait.column(name)[i0 : i0 + n].mean()
-        self.hold = hold
-        self.schedule = sorted(schedule or [])
-        h = ctrl.settings.control_dt
-        self.h = h
-        # CPG phase at the hand-over: the recording time handover maps to this time within the cycle
-        phase_s = (self.handover - cyc_start) % ctrl.period if transition == "recording" else 0.0
-        ctrl.reset_phase(phase_s)
-        if transition == "standing":
-            ctrl.set_modulation_state(zeta, 0.0)
-            ctrl.set_alpha(alpha)
-        else:  # take over the recording at its own pace; the requested ζ, α are commanded after the blend
-            ctrl.set_modulation_state(1.0, 1.0)
-            if (zeta, alpha) != (1.0, 1.0):
-                self.schedule = sorted([*self.schedule, (self.handover + self.blend, zeta, alpha)])
-        self._t_net = self.handover  # sim time the network state corresponds to
-        self._cache = None
-        self.feedback_g: np.ndarray | None = None  # eqs 16–17 g_k applied while stepping (feedback.py)
-
-    def _advance(self, t: float) -> None:
-        while self.schedule and self.schedule[0][0] <= t + 1e-12:
-            _, z, a = self.schedule.pop(0)
-            self.ctrl.set_zeta(z)
-            self.ctrl.set_alpha(a)
-        while self._t_net + 0.5 * self.h <= t:
-            self.ctrl.step(self.h, self.feedback_g)
-            self._t_net += self.h
-
-    def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        if t < self.handover:
-            return self.playback.targets(t)
-        self._advance(t)
-        qc, qdc = self.ctrl.joint_targets()
-        q = self.hold.copy()
-        qd = np.zeros(len(JOINT_NAMES))
-        u = (t - self.handover) / self.blend if self.blend > 0 else 1.0
-        if u >= 1.0:
-            q[self._idx] = qc
-            qd[self._idx] = qdc
-            return q, qd
-        w, dw = _smootherstep(u)
-        dw /= self.blend
-        if self.transition == "recording":
-            q0, qd0 = self.playback.targets(t)
-        else:
-            q0 = self.standing.copy()
-            qd0 = np.zeros(len(JOINT_NAMES))
-            q0[self._idx] = self.standing[self._idx] + (qc - self.ctrl.net.offset)  # sway about standing
-            qd0[self._idx] = qdc
-        q[self._idx] = qc
-        qd[self._idx] = qdc
-        q_out = (1 - w) * q0 + w * q
-        qd_out = (1 - w) * qd0 + w * qd + dw * (q - q0)
-        return q_out, qd_out
-
-
-def _smootherstep(u: float) -> tuple[float, float]:
-    """w(u) = 6u⁵ − 15u⁴ + 10u³ on [0, 1] (C², zero slope and curvature at both ends) and dw/du."""
-    u = min(max(u, 0.0), 1.0)
-    return u**3 * (10 - 15 * u + 6 * u * u), 30 * u * u * (1 - u) ** 2

@@ -34,6 +34,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from cpg_walker.cpg.hopf import phase
+from cpg_walker.robot.contact import TouchdownDetector
 from cpg_walker.robot.joints import CONTROLLED_JOINTS, PAPER_LEG_DOFS, SIDES
 
 PATHWAYS = ("lateral", "pendulum", "reset")
@@ -65,9 +67,6 @@ class FeedbackConfig:
     g_limit: float = 8.0  # |g| clip (internal units; g = 8 ≈ +40 % radius)
     reset_phase_rad: float = 0.0  # right Hip2 oscillator 0 phase at right touchdown (learned gait)
     reset_strength: float = 1.0  # fraction of the phase error removed at a reset
-    contact_on_n: float = 10.0
-    contact_off_n: float = 3.0
-    min_swing_s: float = 0.25
 
     def __post_init__(self) -> None:
         if self.lateral_mode not in ("abs", "signed"):
@@ -125,19 +124,6 @@ def feedback_vector(psi_lat: float, psi_pend: float, zeta: float, cfg: FeedbackC
 
 
 # ------------------------------------------------------------------------------------------- sensing
-def tilt_from_quat(q: np.ndarray | tuple[float, float, float, float]) -> tuple[float, float]:
-    """(lateral roll, sagittal pitch) in rad from an orientation quaternion (w, x, y, z) of the chest:
-    roll > 0 = leaning right, pitch > 0 = leaning forward (the same as Hoap2Sim.torso_tilt)."""
-    w, x, y, z = (float(v) for v in q)
-    # rotation matrix columns 0 (x-axis) and 2 (up-axis) in the world
-    r00, r10 = 1 - 2 * (y * y + z * z), 2 * (x * y + w * z)
-    up = (2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y))
-    yaw = math.atan2(r10, r00)
-    c, s = math.cos(yaw), math.sin(yaw)
-    fx, fy = c * up[0] + s * up[1], -s * up[0] + c * up[1]
-    return math.atan2(-fy, up[2]), math.atan2(fx, up[2])
-
-
 class LowPass:
     """First-order low-pass, exact for a held input over dt."""
 
@@ -155,35 +141,7 @@ class LowPass:
         return self.y
 
 
-class TouchdownDetector:
-    """Right/left touchdowns from sole loads: load > on after the foot was lifted (< off) >= min_swing."""
-
-    def __init__(self, on_n: float = 10.0, off_n: float = 3.0, min_swing_s: float = 0.25):
-        self.on, self.off, self.min_swing = on_n, off_n, min_swing_s
-        self.state: list[tuple[bool, float | None]] | None = None
-
-    def update(self, t: float, loads: tuple[float, float]) -> tuple[bool, bool]:
-        """(left, right) touchdown events at time t."""
-        if self.state is None:
-            self.state = [(loads[0] > self.on, None), (loads[1] > self.on, None)]
-            return False, False
-        ev = [False, False]
-        for i in range(2):
-            down, lifted = self.state[i]
-            if not down and loads[i] > self.on:
-                ev[i] = lifted is not None and t - lifted >= self.min_swing
-                self.state[i] = (True, None)
-            elif down and loads[i] < self.off:
-                self.state[i] = (False, t)
-        return ev[0], ev[1]
-
-
 # ------------------------------------------------------------------------------------------- phase reset
-def oscillator_phase(x: float, y: float) -> float:
-    """θ = atan2(x, −y) (eq 9)."""
-    return math.atan2(x, -y)
-
-
 def phase_reset(state: np.ndarray, omega: np.ndarray, target: float, ref: tuple[int, int] = (RIGHT_HIP2, 0),
                 strength: float = 1.0) -> float:
     """Shift all oscillators in time so oscillator ``ref`` = (cpg, i) reaches phase ``target``.
@@ -193,7 +151,7 @@ def phase_reset(state: np.ndarray, omega: np.ndarray, target: float, ref: tuple[
     strength, so every relative phase (eq 8 harmonics, eq 13 inter-DOF links, the legs' π) is kept.
     Returns Δ (rad)."""
     b0, i0 = ref
-    d = (target - oscillator_phase(state[0, b0, i0], state[1, b0, i0]) + math.pi) % (2 * math.pi) - math.pi
+    d = (target - phase(state[0, b0, i0], state[1, b0, i0]) + math.pi) % (2 * math.pi) - math.pi
     d *= strength
     ang = (omega / omega[b0, i0]) * d
     c, s = np.cos(ang), np.sin(ang)
@@ -215,7 +173,7 @@ class FeedbackController:
         self.cfg = cfg
         self.pathways = tuple(pathways)
         self.tilt = LowPass(cfg.tilt_time_constant_s)
-        self.touch = TouchdownDetector(cfg.contact_on_n, cfg.contact_off_n, cfg.min_swing_s)
+        self.touch = TouchdownDetector()
         self.psi = (0.0, 0.0)
         self._t: float | None = None
         self.resets: list[tuple[float, float]] = []  # (t, Δ rad)
@@ -231,42 +189,3 @@ class FeedbackController:
 
     def g(self, zeta: float) -> np.ndarray:
         return feedback_vector(self.psi[0], self.psi[1], zeta, self.cfg, self.pathways)
-
-
-# ------------------------------------------------------------------------------------------- target source
-def _gait_source_class():  # humanoid imports gait data lazily; keep this module light to import
-    from cpg_walker.cpg.humanoid import CPGGaitSource
-
-    return CPGGaitSource
-
-
-class FeedbackGaitSource(_gait_source_class()):
-    """CPGGaitSource with the feedback pathways closed after the hand-over cross-fade.
-
-    The loop calls ``observe(t, tilt, loads)`` every control tick before ``targets(t)``. Once the CPG has
-    taken over (t >= handover + blend) the g vector of eqs 14–18 (at the applied ζ) is held over the
-    network steps, and a right touchdown resets the phase (if "reset" is among the pathways)."""
-
-    def __init__(self, ctrl, feedback: FeedbackController, **kwargs):
-        super().__init__(ctrl, **kwargs)
-        self.fb = feedback
-        self.active_from = self.handover + self.blend
-        self.g_trace: list[tuple[float, float, float, float, float]] = []  # t, roll, pitch, g_Ankle2, g_Knee
-        self.touchdown_phases: list[float] = []  # right Hip2 oscillator 0 phase at right touchdowns
-
-    def observe(self, t: float, tilt: tuple[float, float], loads: tuple[float, float]) -> None:
-        right_td = self.fb.observe(t, tilt, loads)
-        if t < self.active_from:
-            return
-        self._advance(t)  # the network at t before the reset / the new g
-        g = self.fb.g(self.ctrl.zeta)
-        self.feedback_g = g if np.any(g) else None
-        if right_td:
-            st = self.ctrl.net.state
-            self.touchdown_phases.append(oscillator_phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0]))
-        if right_td and "reset" in self.fb.pathways:
-            d = phase_reset(self.ctrl.net.state, self.ctrl.net.omega, self.fb.cfg.reset_phase_rad,
-                            strength=self.fb.cfg.reset_strength)
-            self.fb.resets.append((t, d))
-        if round(t / 0.01) * 0.01 == round(t, 9):
-            self.g_trace.append((t, *self.fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))

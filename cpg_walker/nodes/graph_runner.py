@@ -1,4 +1,4 @@
-"""The node graph in the foreground (``cpg-walker graph``): start it with ``cpg_walker.graph.Graph``,
+"""The node graph in the foreground (``cpg-walker graph``): start it with ``cpg_walker.nodes.graph.Graph``,
 stream the nodes' log lines with a prefix, stop everything on Ctrl-C / SIGTERM / SIGHUP or when a node
 (normally the sim, at the end of ``duration``) exits."""
 
@@ -30,10 +30,11 @@ class GraphSpec:
 
     def node_params(self) -> dict[str, dict[str, object]]:
         """Each node's start-up parameters (validated: ValueError)."""
-        from cpg_walker.nodes.cpg_node import validate_modulation
+        from cpg_walker.nodes.runtime import PACINGS
+        from cpg_walker.walker.controller import modulation_error
 
-        if self.pacing not in ("realtime", "lockstep", "fast"):
-            raise ValueError(f"pacing must be realtime, lockstep or fast, got {self.pacing!r}")
+        if self.pacing not in PACINGS:
+            raise ValueError(f"pacing must be one of {PACINGS}, got {self.pacing!r}")
         if not (self.duration >= 0 and math.isfinite(self.duration)):
             raise ValueError(f"--duration must be >= 0 sim seconds (0: until stopped), got {self.duration}")
         target = "target_player_node" if self.player else "cpg_node"
@@ -48,7 +49,7 @@ class GraphSpec:
                 continue
             if self.player:
                 raise ValueError(f"--{name} is a cpg_node parameter; not with --player")
-            reason = validate_modulation(name, value)
+            reason = modulation_error(name, value)
             if reason:
                 raise ValueError(reason)
             out["cpg_node"][name] = float(value)
@@ -61,7 +62,7 @@ class GraphSpec:
 
 def resolve_domain(domain_id: int | None) -> tuple[int, str]:
     """(domain, where it came from): the option, else ROS_DOMAIN_ID, else a free one."""
-    from cpg_walker.graph import quiet_domain_id
+    from cpg_walker.nodes.graph import quiet_domain_id
 
     if domain_id is not None:
         chosen, how = domain_id, "--domain-id"
@@ -130,7 +131,7 @@ def banner(domain: int, how: str, spec: GraphSpec, log_dir: Path) -> str:
 def run_foreground(spec: GraphSpec, out: TextIO = sys.stdout) -> int:
     """Run the graph until the sim ends (or a node fails, or a signal); the exit status: 0 when the sim
     ended by itself with status 0 (or a signal stopped everything), else the failing node's status."""
-    from cpg_walker.graph import Graph
+    from cpg_walker.nodes.graph import Graph
 
     params = spec.node_params()
     domain, how = resolve_domain(spec.domain_id)

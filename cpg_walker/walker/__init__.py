@@ -1,0 +1,1 @@
+"""The HOAP-2 walking controller: the generic CPG (cpg/) bound to the robot (robot/), no ROS."""

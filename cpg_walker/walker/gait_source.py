@@ -1,0 +1,161 @@
+"""Target sources of the in-process loop and of cpg_node: the learned CPG from standing to walking.
+
+``CPGGaitSource`` plays the recording's opening steps, hands over to the CPG (start-up transition) and
+then steps the frozen network once per control tick; ``FeedbackGaitSource`` also closes the sensory
+feedback pathways of walker/feedback.py. Both have ``names`` and ``targets(t) -> (q, qd)`` (walker/loop.py's
+TargetSource); the feedback one also ``observe(t, tilt, loads)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cpg_walker.cpg.hopf import phase
+from cpg_walker.robot.gait_data import GaitPlayback, find_steady_cycle, load_gait
+from cpg_walker.robot.joints import JOINT_NAMES
+from cpg_walker.walker.controller import DOFS, HumanoidCPG
+from cpg_walker.walker.feedback import ANKLE2, KNEE, RIGHT_HIP2, FeedbackController, phase_reset
+
+
+class CPGGaitSource:
+    """A run_replay target source (``names`` = all 25 joints, ``targets(t)`` -> (q, q̇)) driven by the CPG.
+
+    Start-up transitions from the standing posture (the recording's first row):
+
+    * ``"recording"`` (default): play the recording's opening steps up to ``handover_s`` (default: the
+      teaching cycle's start, 5.616 s for the walk — the recorded steps from standing into the steady
+      gait), with the CPG started at the matching phase of the teaching cycle, then cross-fade from the
+      recording (continued in its steady cycle) to the CPG over ``blend_s`` (C² smootherstep weight).
+    * ``"standing"``: CPG from t = 0 at phase 0, its oscillating part faded in from α = 0 (the α filter)
+      and the offsets blended from the standing posture to the learned mean posture over ``blend_s``.
+
+    Joints the CPG does not control follow the recording until the hand-over, then hold the teaching
+    cycle's mean (hip yaw ≈ 0, arms at their mean, body, and head/hands at 0 as in the replay).
+    ``schedule``: list of (time_s, zeta, alpha) commands applied when t reaches time_s. With the
+    "recording" transition, `zeta`/`alpha` other than 1 are commanded when the cross-fade ends (the CPG
+    takes over the recording at the recording's pace first)."""
+
+    def __init__(self, ctrl: HumanoidCPG, transition: str = "recording", handover_s: float | None = None,
+                 blend_s: float = 1.0, schedule: list[tuple[float, float, float]] | None = None,
+                 zeta: float = 1.0, alpha: float = 1.0):
+        if transition not in ("recording", "standing"):
+            raise ValueError(f"unknown transition {transition!r}; use 'recording' or 'standing'")
+        if not (blend_s >= 0 and math.isfinite(blend_s)):
+            raise ValueError(f"blend_s must be >= 0, got {blend_s}")
+        self.ctrl = ctrl
+        self.names = JOINT_NAMES
+        self.transition = transition
+        gait = load_gait(ctrl.meta["teaching"]["gait"])
+        self.playback = GaitPlayback(gait, cycle=find_steady_cycle(gait))
+        self.standing = self.playback.standing_posture()
+        cyc_start = float(ctrl.meta["teaching"]["cycle_start_s"])
+        self.handover = cyc_start if handover_s is None else float(handover_s)
+        if transition == "standing":
+            self.handover = 0.0
+        if self.handover < 0:
+            raise ValueError(f"handover_s must be >= 0, got {handover_s}")
+        self.blend = float(blend_s)
+        self._idx = np.array([JOINT_NAMES.index(j) for j in DOFS])
+        i0 = round(cyc_start / gait.dt)
+        n = round(ctrl.period / gait.dt)
+        hold = np.zeros(len(JOINT_NAMES))
+        for j, name in enumerate(JOINT_NAMES):
+            if name in gait.names:
+                hold[j] = gait.column(name)[i0 : i0 + n].mean()
+        self.hold = hold
+        self.schedule = sorted(schedule or [])
+        h = ctrl.settings.control_dt
+        self.h = h
+        # CPG phase at the hand-over: the recording time handover maps to this time within the cycle
+        phase_s = (self.handover - cyc_start) % ctrl.period if transition == "recording" else 0.0
+        ctrl.reset_phase(phase_s)
+        if transition == "standing":
+            ctrl.set_modulation_state(zeta, 0.0)
+            ctrl.set_alpha(alpha)
+        else:  # take over the recording at its own pace; the requested ζ, α are commanded after the blend
+            ctrl.set_modulation_state(1.0, 1.0)
+            if (zeta, alpha) != (1.0, 1.0):
+                self.schedule = sorted([*self.schedule, (self.handover + self.blend, zeta, alpha)])
+        self._t_net = self.handover  # sim time the network state corresponds to
+        self._cache = None
+        self.feedback_g: np.ndarray | None = None  # eqs 16–17 g_k applied while stepping (feedback.py)
+
+    def _advance(self, t: float) -> None:
+        while self.schedule and self.schedule[0][0] <= t + 1e-12:
+            _, z, a = self.schedule.pop(0)
+            self.ctrl.set_zeta(z)
+            self.ctrl.set_alpha(a)
+        while self._t_net + 0.5 * self.h <= t:
+            self.ctrl.step(self.h, self.feedback_g)
+            self._t_net += self.h
+
+    def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        if t < self.handover:
+            return self.playback.targets(t)
+        self._advance(t)
+        qc, qdc = self.ctrl.joint_targets()
+        q = self.hold.copy()
+        qd = np.zeros(len(JOINT_NAMES))
+        u = (t - self.handover) / self.blend if self.blend > 0 else 1.0
+        if u >= 1.0:
+            q[self._idx] = qc
+            qd[self._idx] = qdc
+            return q, qd
+        w, dw = _smootherstep(u)
+        dw /= self.blend
+        if self.transition == "recording":
+            q0, qd0 = self.playback.targets(t)
+        else:
+            q0 = self.standing.copy()
+            qd0 = np.zeros(len(JOINT_NAMES))
+            q0[self._idx] = self.standing[self._idx] + (qc - self.ctrl.net.offset)  # sway about standing
+            qd0[self._idx] = qdc
+        q[self._idx] = qc
+        qd[self._idx] = qdc
+        q_out = (1 - w) * q0 + w * q
+        qd_out = (1 - w) * qd0 + w * qd + dw * (q - q0)
+        return q_out, qd_out
+
+
+def _smootherstep(u: float) -> tuple[float, float]:
+    """w(u) = 6u⁵ − 15u⁴ + 10u³ on [0, 1] (C², zero slope and curvature at both ends) and dw/du."""
+    u = min(max(u, 0.0), 1.0)
+    return u**3 * (10 - 15 * u + 6 * u * u), 30 * u * u * (1 - u) ** 2
+
+
+class FeedbackGaitSource(CPGGaitSource):
+    """CPGGaitSource with the feedback pathways closed after the hand-over cross-fade.
+
+    The loop calls ``observe(t, tilt, loads)`` every control tick before ``targets(t)``. Once the CPG has
+    taken over (t >= handover + blend) the g vector of eqs 14–18 (at the applied ζ) is held over the
+    network steps, and a right touchdown resets the phase (if "reset" is among the pathways)."""
+
+    trace_dt = 0.01  # s of sim time between g_trace samples
+
+    def __init__(self, ctrl: HumanoidCPG, feedback: FeedbackController, **kwargs):
+        super().__init__(ctrl, **kwargs)
+        self._next_trace = -math.inf
+        self.fb = feedback
+        self.active_from = self.handover + self.blend
+        self.g_trace: list[tuple[float, float, float, float, float]] = []  # t, roll, pitch, g_Ankle2, g_Knee
+        self.touchdown_phases: list[float] = []  # right Hip2 oscillator 0 phase at right touchdowns
+
+    def observe(self, t: float, tilt: tuple[float, float], loads: tuple[float, float]) -> None:
+        right_td = self.fb.observe(t, tilt, loads)
+        if t < self.active_from:
+            return
+        self._advance(t)  # the network at t before the reset / the new g
+        g = self.fb.g(self.ctrl.zeta)
+        self.feedback_g = g if np.any(g) else None
+        if right_td:
+            st = self.ctrl.net.state
+            self.touchdown_phases.append(phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0]))
+        if right_td and "reset" in self.fb.pathways:
+            d = phase_reset(self.ctrl.net.state, self.ctrl.net.omega, self.fb.cfg.reset_phase_rad,
+                            strength=self.fb.cfg.reset_strength)
+            self.fb.resets.append((t, d))
+        if t >= self._next_trace - 1e-9:  # one sample per trace_dt of sim time, whatever the tick rate
+            self.g_trace.append((t, *self.fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
+            self._next_trace = t + self.trace_dt

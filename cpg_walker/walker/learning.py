@@ -1,0 +1,72 @@
+"""Where the HOAP-2 controller comes from: its learning settings and the learned CPG file.
+
+One home for both lookups every consumer shares (cpg_node, ``cpg-walker cpg-walk``/``walk``/``learn``,
+the benchmarks): ``learning_settings`` reads config/cpg_humanoid_learning.yaml, ``resolve_cpg_file``
+turns a ``cpg_file`` value into a path, ``load_controller`` loads it or learns at start-up.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from cpg_walker.cpg.network import CPGParams
+from cpg_walker.paths import config_path
+from cpg_walker.walker.controller import HumanoidCPG, HumanoidSettings
+
+LEARNING_CONFIG = "cpg_humanoid_learning.yaml"
+#: The packaged learned CPG (cpg_node's default ``cpg_file``); ``cpg-walker learn --install`` rewrites it.
+DEFAULT_CPG_FILE = "cpg_humanoid.yaml"
+
+
+def load_learning_config(path: str | Path | None = None) -> dict:
+    """config/cpg_humanoid_learning.yaml (or ``path``) as a dict with 'cpg' and 'humanoid' sections."""
+    path = config_path(LEARNING_CONFIG) if path is None else Path(path)
+    with open(path, encoding="utf-8") as fh:
+        cfg = yaml.safe_load(fh)
+    if not isinstance(cfg, dict) or "humanoid" not in cfg or "cpg" not in cfg:
+        raise ValueError(f"{path}: expected 'cpg' and 'humanoid' sections")
+    return cfg
+
+
+def learning_settings(n_oscillators: int | None = None,
+                      cfg: dict | None = None) -> tuple[HumanoidSettings, CPGParams]:
+    """HumanoidSettings and CPGParams from the learning YAML (N overridable)."""
+    cfg = cfg or load_learning_config()
+    h = dict(cfg["humanoid"])
+    if n_oscillators is not None:
+        h["n_oscillators"] = n_oscillators
+    settings = HumanoidSettings.from_mapping(h, LEARNING_CONFIG)
+    params = CPGParams(**{k: float(v) for k, v in cfg["cpg"].items()}, amplitude_time_constant=0.0)
+    return settings, params
+
+
+def resolve_cpg_file(cpg_file: str | Path) -> Path:
+    """A learned-CPG file: an existing path as given, else a bare name in the package's config/."""
+    path = Path(cpg_file)
+    if not path.is_file() and not path.is_absolute() and len(path.parts) == 1:
+        try:
+            return config_path(str(path))
+        except FileNotFoundError:
+            pass
+    if not path.is_file():
+        raise FileNotFoundError(f"learned CPG file not found: {path} (run 'cpg-walker learn --out DIR')")
+    return path
+
+
+def load_controller(cpg_file: str | Path | None = DEFAULT_CPG_FILE,
+                    n_oscillators: int | None = None) -> tuple[HumanoidCPG, str, bool]:
+    """(controller, where it came from, learning converged). ``cpg_file`` None or '' learns now from the
+    recorded walk with ``n_oscillators`` (default: the learning YAML's N); a file whose N differs from a
+    requested ``n_oscillators`` is an error."""
+    if cpg_file:
+        path = resolve_cpg_file(cpg_file)
+        ctrl = HumanoidCPG.load(path)  # ValueError naming the file and the bad field if corrupt
+        if n_oscillators is not None and ctrl.net.N != n_oscillators:
+            raise ValueError(f"{path} has {ctrl.net.N} oscillators per DOF, {n_oscillators} were asked for")
+        return ctrl, str(path), bool(ctrl.meta.get("learning", {}).get("converged", True))
+    settings, params = learning_settings(n_oscillators)
+    ctrl, report = HumanoidCPG.learn(settings=settings, params=params)
+    origin = f"learned at start-up (N={ctrl.net.N}, {report.wall_time_s:.1f} s)"
+    return ctrl, origin, bool(report.converged)

@@ -1,0 +1,171 @@
+"""In-process replay: a target source drives the PID servos of the simulated HOAP-2 (no ROS).
+
+The PID runs as an explicit torque law at ``rate_hz`` on joint state that is ``delay_s`` old, and its
+torque is held between ticks - the way it will run as a ROS node. The target source is pluggable: any
+object with ``names`` and ``targets(t) -> (q, qd)`` (the recorded gait, later a CPG). A source that
+also has ``observe(t, tilt, loads)`` gets, at every control tick before ``targets(t)``, the chest IMU
+tilt (roll, pitch) in rad computed from the IMU orientation quaternion and the (left, right) sole loads
+in N — the readings a ROS node gets from /imu and /foot_load (sensory feedback, cpg/feedback.py).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from cpg_walker.robot.contact import TouchdownDetector
+from cpg_walker.robot.hoap2 import Hoap2Sim
+from cpg_walker.robot.joints import JOINT_NAMES
+from cpg_walker.robot.pid import PidLaw
+
+
+class TargetSource(Protocol):
+    names: tuple[str, ...]
+
+    def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+@dataclass
+class ReplayResult:
+    """Time series (every ``log_dt``) and contact events of one replay, plus the summary metrics."""
+
+    t: np.ndarray
+    base_xy: np.ndarray
+    base_z: np.ndarray
+    heading: np.ndarray
+    loads: np.ndarray
+    touchdowns: dict[str, list[float]]
+    fell: bool
+    fall_time_s: float | None
+    duration_s: float
+    metrics: dict = field(default_factory=dict)
+
+
+def run_replay(
+    sim: Hoap2Sim,
+    source: TargetSource,
+    pid: PidLaw,
+    duration: float,
+    rate_hz: float = 500.0,
+    delay_s: float = 0.002,
+    log_dt: float = 0.01,
+    stop_on_fall: bool = True,
+    progress=None,
+    on_log=None,
+) -> ReplayResult:
+    """Run ``duration`` s from the current sim state (call ``sim.reset()`` first); see module docstring.
+
+    ``on_log(sim)`` is called every ``log_dt`` (e.g. to render frames)."""
+    if not (duration > 0 and rate_hz > 0 and delay_s >= 0):
+        raise ValueError("replay: duration and rate must be positive, delay non-negative")
+    if tuple(source.names) != tuple(pid.names):
+        raise ValueError("replay: the target source and the PID must cover the same joints in the same order")
+    sel = [JOINT_NAMES.index(n) for n in pid.names]
+    dt = sim.dt
+    per_tick = max(1, round(1.0 / (rate_hz * dt)))
+    delay_steps = round(delay_s / dt)
+    history: deque = deque(maxlen=delay_steps + 1)
+    n_steps = round(duration / dt)
+    log_every = max(1, round(log_dt / dt))
+    t0 = sim.time
+    rows_t, rows_xy, rows_z, rows_h, rows_l = [], [], [], [], []
+    touch = TouchdownDetector()
+    touch.update(0.0, sim.sole_loads())
+    fell, fall_time = False, None
+    tau_full = np.zeros(len(JOINT_NAMES))
+    pid.reset()
+    observe = getattr(source, "observe", None)
+    for k in range(n_steps):
+        history.append((sim.data.qpos[sim._qadr].copy(), sim.data.qvel[sim._dadr].copy()))
+        if k % per_tick == 0:
+            q, v = history[0]
+            if observe is not None:
+                observe(sim.time - t0, sim.imu().tilt(), sim.sole_loads())
+            qt, vt = source.targets(sim.time - t0)
+            tau_full[sel] = pid.step(qt, vt, q[sel], v[sel], per_tick * dt)
+            sim.step(tau_full, 1)
+        else:
+            sim.step(None, 1)
+        if (k + 1) % log_every == 0:
+            t = sim.time - t0
+            loads = sim.sole_loads()
+            touch.update(t, loads)
+            pos, _ = sim.base_pose()
+            rows_t.append(t)
+            rows_xy.append(pos[:2])
+            rows_z.append(pos[2])
+            rows_h.append(sim.heading())
+            rows_l.append(loads)
+            if on_log is not None:
+                on_log(sim)
+            if progress is not None:
+                progress.update(t)
+            if not fell and sim.has_fallen():
+                fell, fall_time = True, t
+                if stop_on_fall:
+                    break
+    result = ReplayResult(
+        t=np.array(rows_t), base_xy=np.array(rows_xy), base_z=np.array(rows_z),
+        heading=np.unwrap(np.array(rows_h)), loads=np.array(rows_l), touchdowns=touch.events,
+        fell=fell, fall_time_s=fall_time, duration_s=float(rows_t[-1]) if rows_t else 0.0,
+    )
+    result.metrics = summarize(result, start_xy=None)
+    return result
+
+
+def summarize(r: ReplayResult, start_xy: np.ndarray | None = None, period_s: float | None = None) -> dict:
+    """Distance along the starting heading, lateral drift, heading change, speed, steps, contact timing."""
+    if len(r.t) == 0:
+        raise ValueError("replay produced no samples")
+    h0 = float(r.heading[0])
+    p0 = r.base_xy[0] if start_xy is None else np.asarray(start_xy)
+    d = r.base_xy[-1] - p0
+    fwd = np.array([math.cos(h0), math.sin(h0)])
+    left = np.array([-math.sin(h0), math.cos(h0)])
+    distance = float(d @ fwd)
+    right_td = np.array(r.touchdowns["right"])
+    left_td = np.array(r.touchdowns["left"])
+    steps = len(right_td) + len(left_td)
+    m = {
+        "fell": bool(r.fell),
+        "fall_time_s": None if r.fall_time_s is None else round(float(r.fall_time_s), 3),
+        "duration_s": round(float(r.duration_s), 3),
+        "distance_m": round(distance, 4),
+        "lateral_drift_m": round(float(d @ left), 4),
+        "heading_change_deg": round(math.degrees(float(r.heading[-1] - h0)), 2),
+        "mean_speed_mps": round(distance / r.duration_s, 4) if r.duration_s > 0 else 0.0,
+        "steps": int(steps),
+        "min_torso_height_m": round(float(r.base_z.min()), 4),
+    }
+    if len(right_td) > 2:
+        m["right_touchdown_interval_s"] = round(float(np.median(np.diff(right_td))), 3)
+    if len(left_td) > 2:
+        m["left_touchdown_interval_s"] = round(float(np.median(np.diff(left_td))), 3)
+    if period_s is not None:
+        m["gait_period_s"] = round(float(period_s), 3)
+    return m
+
+
+def recording_setup(gait: str = "walk", data: str | None = None, duration: float | None = None,
+                    need_cycle: bool = True):
+    """The recording (``data`` CSV, else the packaged ``gait``), the run's duration (default: the
+    recording, at least 30 s) and its steady cycle. Without a steady cycle the recording plays once (a
+    cycle longer than it); with ``need_cycle`` that is an error when ``duration`` runs past its end."""
+    from cpg_walker.robot.gait_data import Cycle, find_steady_cycle, load_gait
+
+    recording = load_gait(data if data is not None else gait)
+    if duration is None:
+        duration = max(30.0, recording.duration)
+    if not (duration > 0):
+        raise ValueError(f"--duration must be positive, got {duration}")
+    try:
+        cycle = find_steady_cycle(recording)
+    except ValueError as exc:
+        if need_cycle and duration > recording.duration:
+            raise ValueError(f"cannot continue past the recording's end: {exc}") from None
+        cycle = Cycle(start=0.0, period=recording.duration + 1.0, mismatch_rad=float("nan"))
+    return recording, duration, cycle
