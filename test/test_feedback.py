@@ -33,10 +33,11 @@ def ctrl() -> HumanoidCPG:
 
 
 def test_gains_eq19_20():
-    assert gains(1.0) == (2000.0, 0.0)
-    k_lat, k_pend = gains(1.5)
+    cfg = FeedbackConfig.load(lateral_base=2000.0, lateral_slope=200.0, pendulum_slope=1000.0)
+    assert gains(1.0, cfg) == (2000.0, 0.0)
+    k_lat, k_pend = gains(1.5, cfg)
     assert k_lat == pytest.approx(2100.0) and k_pend == pytest.approx(500.0)
-    k_lat, k_pend = gains(0.8)
+    k_lat, k_pend = gains(0.8, cfg)
     assert k_lat == pytest.approx(1960.0) and k_pend == pytest.approx(-200.0)
 
 
@@ -51,7 +52,8 @@ def test_lateral_signs():
 
 
 def test_feedback_vector_targets_the_right_cpgs():
-    cfg = FeedbackConfig(gain_scale=0.01, g_limit=100.0)
+    cfg = FeedbackConfig.load(gain_scale=0.01, g_limit=100.0, lateral_base=2000.0, lateral_slope=200.0,
+                              pendulum_slope=1000.0, lateral_mode="abs")
     g = feedback_vector(0.05, 0.02, 1.5, cfg)
     assert np.allclose(g[list(ANKLE2)], 0.01 * 2100 * 0.05)
     assert np.allclose(g[list(HIP1)], -0.01 * 2100 * 0.05)
@@ -154,13 +156,43 @@ def test_touchdown_detector():
 
 def test_controller_filters_and_rejects_unknown_pathways():
     with pytest.raises(ValueError):
-        FeedbackController(FeedbackConfig(), ("lateral", "vision"))
-    fc = FeedbackController(FeedbackConfig(tilt_time_constant_s=0.1, pitch_reference_rad=0.05), ("lateral",))
+        FeedbackController(FeedbackConfig.load(), ("lateral", "vision"))
+    fc = FeedbackController(FeedbackConfig.load(tilt_time_constant_s=0.1, pitch_reference_rad=0.05),
+                            ("lateral",))
     fc.observe(0.0, (0.0, 0.05), (20, 20))
     fc.observe(0.1, (0.1, 0.05), (20, 20))
     assert fc.psi[0] == pytest.approx(0.1 * (1 - math.exp(-1)))
     assert fc.psi[1] == pytest.approx(0.0)
     assert FeedbackConfig.load().lateral_mode in ("abs", "signed")
+
+
+def test_feedback_config_lives_in_the_yaml_only(tmp_path):
+    with pytest.raises(TypeError):
+        FeedbackConfig()  # no code defaults: config/feedback.yaml is the one home of the values
+    bad = tmp_path / "fb.yaml"
+    bad.write_text("gain_scale: 0.01\n")
+    with pytest.raises(ValueError, match="missing key"):
+        FeedbackConfig.load(str(bad))
+    with pytest.raises(ValueError, match="unknown key"):
+        FeedbackConfig.load(gain_sclae=0.02)
+
+
+def test_feedback_trace_keeps_one_sample_per_trace_period(ctrl):
+    """The g trace has a sample every 10 ms of sim time from 2 ms ticks (float equality dropped some)."""
+    from cpg_walker.walker.gait_source import FeedbackGaitSource
+
+    src = FeedbackGaitSource(HumanoidCPG.from_dict(ctrl.to_dict()),
+                             FeedbackController(FeedbackConfig.load(), ("lateral",)))
+    h = ctrl.settings.control_dt
+    k0 = int(np.ceil(src.active_from / h))
+    n = 1500  # 3 s of 2 ms ticks
+    for k in range(k0, k0 + n):
+        t = k * h
+        src.observe(t, (0.01, 0.06), (30.0, 30.0))
+        src.targets(t)
+    times = np.array([row[0] for row in src.g_trace])
+    assert len(times) == pytest.approx(n * h / src.trace_dt, abs=1)
+    assert np.allclose(np.diff(times), src.trace_dt, atol=1e-9)
 
 
 @pytest.mark.slow

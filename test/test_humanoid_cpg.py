@@ -186,3 +186,32 @@ def test_cpg_walks_forward_without_falling(committed):
     assert m["distance_m"] > 0.05 * 25.0, m  # the recording walks 0.075 m/s
     assert m["right_touchdown_interval_s"] == pytest.approx(2.513, rel=0.05), m
     assert m["cpg_part"]["steps"] >= 2 * int((25.0 - 6.62) / 2.513) - 1, m
+
+
+def test_learn_writes_strict_json_and_leaves_the_packaged_cpg_alone(tmp_path, monkeypatch):
+    """`cpg-walker learn --out DIR` writes only DIR (the packaged file changes only with --install), and
+    learn.json is strict JSON even when the free-run frequency cannot be measured (NaN -> null)."""
+    import json
+
+    from cpg_walker.experiments import learn as learn_mod
+    from cpg_walker.paths import config_path
+
+    packaged = config_path("cpg_humanoid.yaml")
+    before = packaged.read_bytes()
+    real = learn_mod.free_run_errors
+
+    def no_frequency(ctrl, strides):
+        t, Q, P, _ = real(ctrl, strides)
+        return t, Q, P, float("nan")
+
+    monkeypatch.setattr(learn_mod, "free_run_errors", no_frequency)
+    report = learn_mod.run_learn(str(tmp_path), progress_enabled=False)
+
+    def reject(constant: str):
+        raise ValueError(f"learn.json holds {constant}")
+
+    on_disk = json.loads((tmp_path / "learn.json").read_text(), parse_constant=reject)
+    assert on_disk["free_run_gait_frequency_hz"] is None and report["free_run_gait_frequency_hz"] is None
+    assert (tmp_path / "cpg_humanoid.yaml").is_file()
+    assert on_disk["files"]["yaml"] == [str(tmp_path / "cpg_humanoid.yaml")]
+    assert packaged.read_bytes() == before

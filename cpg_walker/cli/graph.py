@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 
 from cpg_walker.nodes.runtime import PACINGS
+from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
 ALIASES = {"sim": "sim_node", "pid": "pid_node", "cpg": "cpg_node", "player": "target_player_node",
            "target_player": "target_player_node"}
@@ -18,8 +19,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the sim node's pacing (default realtime)")
     p.add_argument("--duration", type=float, default=0.0, metavar="S",
                    help="sim seconds, then everything stops (default 0: until Ctrl-C)")
-    p.add_argument("--zeta", type=float, default=None, metavar="Z", help="cpg_node's zeta, in [-2, 2]")
-    p.add_argument("--alpha", type=float, default=None, metavar="A", help="cpg_node's alpha, in [0, 2]")
+    p.add_argument("--zeta", type=float, default=None, metavar="Z",
+                   help=f"cpg_node's zeta, in [{ZETA_RANGE[0]:g}, {ZETA_RANGE[1]:g}]")
+    p.add_argument("--alpha", type=float, default=None, metavar="A",
+                   help=f"cpg_node's alpha, in [{ALPHA_RANGE[0]:g}, {ALPHA_RANGE[1]:g}]")
     p.add_argument("--player", action="store_true",
                    help="target_player_node (the recorded gait) instead of cpg_node")
     p.add_argument("--domain-id", type=int, default=None, metavar="N",

@@ -5,20 +5,23 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.nodes.runtime import PACINGS
+from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("walk", help="CPG walk through the ROS graph (three node processes); write walk.json")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--duration", type=float, default=60.0, metavar="S", help="sim seconds (default 60)")
     p.add_argument("--zeta", type=float, default=1.0, metavar="Z",
-                   help="frequency ratio of the oscillators, in [-2, 2] (default 1)")
+                   help="frequency ratio of the oscillators, in [{:g}, {:g}] (default 1)".format(*ZETA_RANGE))
     p.add_argument("--alpha", type=float, default=1.0, metavar="A",
-                   help="amplitude (step length) scale, in [0, 2] (default 1)")
+                   help="amplitude (step length) scale, in [{:g}, {:g}] (default 1)".format(*ALPHA_RANGE))
     p.add_argument("--feedback", choices=("on", "off"), default="off",
-                   help="sensory feedback (eqs 14-20); only 'off' exists so far")
+                   help="sensory feedback (eqs 14-20): not in cpg_node yet (in-process: cpg-walk --feedback)")
     p.add_argument("--cpg-file", default="cpg_humanoid.yaml", metavar="FILE",
                    help="learned CPG YAML (default config/cpg_humanoid.yaml, N=3; '' = cpg_node learns it)")
-    p.add_argument("--pacing", choices=("lockstep", "realtime", "fast"), default="lockstep",
+    p.add_argument("--pacing", choices=PACINGS, default="lockstep",
                    help="the sim node's pacing (default lockstep: deterministic)")
     p.set_defaults(func=_run)
 
@@ -29,8 +32,8 @@ def _run(args: argparse.Namespace) -> int:
     from cpg_walker.cli.main import UserError
 
     if args.feedback == "on":
-        raise UserError("--feedback on is not implemented yet (sensory feedback, eqs 14-20, is the next "
-                        "issue); use --feedback off")
+        raise UserError("--feedback on: cpg_node does not close the feedback pathways yet; the in-process "
+                        "walk does (cpg-walker cpg-walk --feedback on)")
     from cpg_walker.experiments.walk_graph import run_graph_walk
 
     report = run_graph_walk(args.out, duration=args.duration, zeta=args.zeta, alpha=args.alpha,

@@ -54,19 +54,20 @@ RIGHT_HIP2 = CONTROLLED_JOINTS.index(f"rleg_joint_{PAPER_LEG_DOFS['Hip2']}")
 
 @dataclass(frozen=True)
 class FeedbackConfig:
-    """Constants of the feedback pathways (config/feedback.yaml)."""
+    """Constants of the feedback pathways. Their values live in config/feedback.yaml only: build with
+    ``load`` (overrides by keyword)."""
 
-    gain_scale: float = 0.01  # our g per rad of tilt = gain_scale × the paper's K (eqs 19–20)
-    lateral_base: float = 2000.0  # eq 19
-    lateral_slope: float = 200.0  # eq 19
-    pendulum_slope: float = 1000.0  # eq 20
-    lateral_mode: str = "abs"  # "abs" (eqs 14–15 as printed) | "signed" (beyond the paper)
-    lateral_sign: float = 1.0  # s of the signed variant
-    pitch_reference_rad: float = 0.0  # ψ_pend = pitch − this
-    tilt_time_constant_s: float = 0.02  # first-order low-pass on the IMU tilt
-    g_limit: float = 8.0  # |g| clip (internal units; g = 8 ≈ +40 % radius)
-    reset_phase_rad: float = 0.0  # right Hip2 oscillator 0 phase at right touchdown (learned gait)
-    reset_strength: float = 1.0  # fraction of the phase error removed at a reset
+    gain_scale: float  # our g per rad of tilt = gain_scale × the paper's K (eqs 19–20)
+    lateral_base: float  # eq 19
+    lateral_slope: float  # eq 19
+    pendulum_slope: float  # eq 20
+    lateral_mode: str  # "abs" (eqs 14–15 as printed) | "signed" (beyond the paper)
+    lateral_sign: float  # s of the signed variant
+    pitch_reference_rad: float  # ψ_pend = pitch − this
+    tilt_time_constant_s: float  # first-order low-pass on the IMU tilt
+    g_limit: float  # |g| clip (internal units; g = 8 ≈ +40 % radius)
+    reset_phase_rad: float  # right Hip2 oscillator 0 phase at right touchdown (learned gait)
+    reset_strength: float  # fraction of the phase error removed at a reset
 
     def __post_init__(self) -> None:
         if self.lateral_mode not in ("abs", "signed"):
@@ -84,15 +85,18 @@ class FeedbackConfig:
         with open(p, encoding="utf-8") as fh:
             d = yaml.safe_load(fh) or {}
         known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
+        unknown = sorted((set(d) | set(overrides)) - known)
         if unknown:
             raise ValueError(f"{p}: unknown key(s) {unknown}")
         d.update(overrides)
+        missing = sorted(known - set(d))
+        if missing:
+            raise ValueError(f"{p}: missing key(s) {missing}")
         return cls(**d)
 
 
 # ------------------------------------------------------------------------------------------- the laws
-def gains(zeta: float, cfg: FeedbackConfig = FeedbackConfig()) -> tuple[float, float]:
+def gains(zeta: float, cfg: FeedbackConfig) -> tuple[float, float]:
     """Eqs 19–20 in the paper's units: (K_lateral, K_pendulum) at frequency ratio ζ."""
     return cfg.lateral_base + cfg.lateral_slope * (zeta - 1.0), cfg.pendulum_slope * (zeta - 1.0)
 
