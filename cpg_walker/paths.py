@@ -35,3 +35,35 @@ def config_path(name: str) -> Path:
     if not path.is_file():
         raise FileNotFoundError(f"config file not found: {path}")
     return path
+
+
+def ros_parameters(file: str | Path, node: str) -> dict:
+    """The ``ros__parameters`` of ``node`` in a ROS 2 parameters file (a bare name: in config/; else a
+    path),
+    flattened the way ROS does: nested keys joined with '.' (``kp: {leg: 100.0}`` -> ``kp.leg``).
+
+    This is the same file the node gets with ``--ros-args --params-file``; the in-process code reads it
+    here so that both use one value. A missing file, node section or ``ros__parameters`` is a ValueError
+    (FileNotFoundError for the file) naming the file."""
+    import yaml
+
+    path = Path(file)
+    if len(path.parts) == 1 and not path.is_absolute():
+        path = config_path(str(file))
+    with open(path, encoding="utf-8") as fh:
+        doc = yaml.safe_load(fh)
+    section = doc.get(node) if isinstance(doc, dict) else None
+    params = section.get("ros__parameters") if isinstance(section, dict) else None
+    if not isinstance(params, dict):
+        raise ValueError(f"{path}: expected '{node}: ros__parameters: {{...}}' (a ROS 2 parameters file)")
+    flat: dict = {}
+
+    def walk(prefix: str, value: object) -> None:
+        if isinstance(value, dict):
+            for key, sub in value.items():
+                walk(f"{prefix}.{key}" if prefix else str(key), sub)
+        else:
+            flat[prefix] = value
+
+    walk("", params)
+    return flat

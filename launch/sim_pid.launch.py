@@ -1,34 +1,64 @@
 """Launch the HOAP-2 graph on a ROS 2 install: sim_node + pid_node (+ target_player_node with
 ``player:=true``). Example: ``ros2 launch cpg_walker sim_pid.launch.py pacing:=lockstep player:=true``.
 
-Without ROS's launch tools (a pip install), use cpg_walker.nodes.graph.Graph instead.
+Each node gets its parameters file from the package's share/config (config/<node name>.yaml: every
+value's one home); a launch argument given on the command line overrides the file's value (left empty,
+the file's stands). The CPG walk: walk.launch.py. Without ROS's launch tools (a pip install), use
+``cpg-walker graph`` (cpg_walker.nodes.graph.Graph).
 """
 
-from launch.actions import DeclareLaunchArgument
-from launch.conditions import IfCondition
-from launch.substitutions import LaunchConfiguration, PythonExpression
+import os
+
+import yaml
+from ament_index_python.packages import get_package_share_directory
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
 
 from launch import LaunchDescription
 
 
+def params(node_name: str) -> str:
+    """The node's parameters file: share/cpg_walker/config/<node_name>.yaml."""
+    return os.path.join(get_package_share_directory("cpg_walker"), "config", f"{node_name}.yaml")
+
+
+def file_value(node_name: str, key: str):
+    """One value of a node's parameters file (to configure another node consistently)."""
+    with open(params(node_name), encoding="utf-8") as fh:
+        return yaml.safe_load(fh)[node_name]["ros__parameters"][key]
+
+
+def nodes(context) -> list:
+    """sim + pid (+ the player), each with its file, then the given launch arguments as overrides."""
+    names = ("pacing", "control_period", "player", "gait")
+    arg = {k: context.launch_configurations.get(k, "") for k in names}
+    pacing = arg["pacing"] or file_value("sim", "pacing")
+    player = arg["player"].lower() == "true"
+    sim = {"use_sim_time": True, "pacing": pacing,
+           **({"control_period": float(arg["control_period"])} if arg["control_period"] else {})}
+    out = [
+        Node(package="cpg_walker", executable="sim_node", name="sim", output="screen",
+             parameters=[params("sim"), sim]),
+        Node(package="cpg_walker", executable="pid_node", name="pid", output="screen",
+             parameters=[params("pid"), {"use_sim_time": True, "lockstep": pacing == "lockstep",
+                                         "wait_for_targets": player}]),
+    ]
+    if player:
+        out.append(Node(package="cpg_walker", executable="target_player_node", name="target_player",
+                        output="screen", parameters=[params("target_player"), {
+                            "use_sim_time": True, **({"gait": arg["gait"]} if arg["gait"] else {})}]))
+    return out
+
+
 def generate_launch_description() -> LaunchDescription:
-    pacing = LaunchConfiguration("pacing")
-    player = LaunchConfiguration("player")
-    lockstep = PythonExpression(["'", pacing, "' == 'lockstep'"])
     return LaunchDescription([
-        DeclareLaunchArgument("pacing", default_value="realtime",
-                              description="realtime | fast | lockstep"),
-        DeclareLaunchArgument("control_period", default_value="0.002", description="s"),
+        DeclareLaunchArgument("pacing", default_value="",
+                              description="realtime | fast | lockstep (empty: config/sim.yaml's)"),
+        DeclareLaunchArgument("control_period", default_value="",
+                              description="s (empty: config/sim.yaml's)"),
         DeclareLaunchArgument("player", default_value="false",
                               description="also stream the recorded walk as /joint_targets"),
-        DeclareLaunchArgument("gait", default_value="walk", description="walk | slow"),
-        Node(package="cpg_walker", executable="sim_node", name="sim", output="screen",
-             parameters=[{"use_sim_time": True, "pacing": pacing,
-                          "control_period": LaunchConfiguration("control_period")}]),
-        Node(package="cpg_walker", executable="pid_node", name="pid", output="screen",
-             parameters=[{"use_sim_time": True, "lockstep": lockstep, "wait_for_targets": player}]),
-        Node(package="cpg_walker", executable="target_player_node", name="target_player", output="screen",
-             condition=IfCondition(player),
-             parameters=[{"use_sim_time": True, "gait": LaunchConfiguration("gait")}]),
+        DeclareLaunchArgument("gait", default_value="",
+                              description="walk | slow (empty: config/target_player.yaml's)"),
+        OpaqueFunction(function=nodes),
     ])

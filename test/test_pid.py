@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from cpg_walker.robot.pid import PidLaw
+from cpg_walker.robot.pid import PidLaw, load_pid_config
 
 
 def _simulate(pid: PidLaw, target: float, inertia: float, t_end: float, dt: float = 0.002, load: float = 0.0):
@@ -58,8 +58,9 @@ def test_non_finite_input_is_refused(bad):
     pid = PidLaw(["x", "y"], kp=10.0, ki=0.0, kd=1.0)
     with pytest.raises(ValueError, match=r"non-finite.*y"):
         pid.step([0.0, bad], [0, 0], [0, 0], [0, 0], 0.002)
-    with pytest.raises(ValueError, match="dt"):
-        pid.step([0, 0], [0, 0], [0, 0], [0, 0], 0.0)
+    for bad_dt in (-0.002, np.nan, np.inf):
+        with pytest.raises(ValueError, match="dt"):
+            pid.step([0, 0], [0, 0], [0, 0], [0, 0], bad_dt)
     with pytest.raises(ValueError, match="expected 2"):
         pid.step([0.0], [0, 0], [0, 0], [0, 0], 0.002)
 
@@ -70,11 +71,20 @@ def test_gains_come_from_the_config_by_group():
     arms = [i for i, n in enumerate(pid.names) if "arm" in n]
     assert len(pid.names) == 25
     assert np.all(pid.kp[legs] == pid.kp[legs[0]]) and pid.kp[legs[0]] > pid.kp[arms[0]] > 0
-    cfg = {"groups": {g: {"kp": 1.0, "kd": 0.1} for g in ("leg", "arm", "body", "head")},
-           "joints": {"lleg_joint_4": {"kp": 7.0}}}
+    cfg = {**load_pid_config(), **{f"{k}.{g}": v for g in ("leg", "arm", "body", "head")
+                                   for k, v in (("kp", 1.0), ("kd", 0.1))}, "kp.lleg_joint_4": 7.0}
     pid = PidLaw.from_config(config=cfg)
     assert pid.kp[pid.names.index("lleg_joint_4")] == 7.0 and pid.kp[pid.names.index("rleg_joint_4")] == 1.0
-    with pytest.raises(ValueError, match="unknown joint"):
-        PidLaw.from_config(config={**cfg, "joints": {"tail": {"kp": 1.0}}})
+    with pytest.raises(ValueError, match="tail"):
+        PidLaw.from_config(config={**cfg, "kp.tail": 1.0})
+    with pytest.raises(ValueError, match=r"missing kd\.head"):
+        PidLaw.from_config(config={k: v for k, v in cfg.items() if k != "kd.head"})
     with pytest.raises(ValueError):
         PidLaw(["j"], kp=-1.0, ki=0.0, kd=0.0)
+
+
+def test_first_sample_dt_zero_is_pd_only():
+    """dt = 0 (pid_node's first state: no interval yet) gives the PD torque and leaves the integral."""
+    pid = PidLaw(["j"], kp=50.0, ki=200.0, kd=2.0, integral_limit=3.0)
+    tau = pid.step([0.1], [0.0], [0.0], [0.5], 0.0)
+    assert tau[0] == pytest.approx(50.0 * 0.1 - 2.0 * 0.5) and pid.integral[0] == 0.0

@@ -8,7 +8,7 @@ import pytest
 from cpg_walker.cli.main import main
 from cpg_walker.robot.gait_data import GaitPlayback, load_gait
 from cpg_walker.robot.hoap2 import Hoap2Sim
-from cpg_walker.robot.pid import PidLaw, load_pid_config
+from cpg_walker.robot.pid import PidLaw
 from cpg_walker.walker.loop import run_replay, summarize
 
 # Forward-distance bounds: the recordings are walked at ~0.075 m/s (walk) and ~0.045 m/s (slow); a robot
@@ -17,10 +17,8 @@ MIN_SPEED = {"walk": 0.05, "slow": 0.03}
 
 
 def _replay(gait: str, duration: float):
-    cfg = load_pid_config()
     source = GaitPlayback(load_gait(gait))
-    result = run_replay(Hoap2Sim(), source, PidLaw.from_config(config=cfg), duration,
-                        rate_hz=cfg["rate_hz"], delay_s=cfg["delay_s"])
+    result = run_replay(Hoap2Sim(), source, PidLaw.from_config(), duration)
     return result, summarize(result, period_s=source.cycle.period)
 
 

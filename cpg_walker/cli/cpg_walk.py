@@ -23,12 +23,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("cpg-walk", help="in-process walk driven by the learned humanoid CPG; walk.json")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--duration", type=float, default=60.0, metavar="S", help="sim seconds (default 60)")
-    p.add_argument("--zeta", type=float, default=1.0, help="frequency ratio (negative = backwards)")
-    p.add_argument("--alpha", type=float, default=1.0, help="amplitude (step length) scale")
+    p.add_argument("--zeta", type=float, default=None,
+                   help="frequency ratio (negative = backwards; default: cpg_node's, config/cpg.yaml)")
+    p.add_argument("--alpha", type=float, default=None,
+                   help="amplitude (step length) scale (default: cpg_node's, config/cpg.yaml)")
     p.add_argument("--oscillators", type=int, default=None, metavar="N",
                    help="oscillators per DOF (learns now unless config/cpg_humanoid.yaml has this N)")
     p.add_argument("--cpg", default=None, metavar="FILE",
-                   help="learned CPG YAML (default config/cpg_humanoid.yaml)")
+                   help="learned CPG YAML (default: cpg_node's cpg_file, config/cpg.yaml)")
     p.add_argument("--transition", choices=("recording", "standing"), default="recording",
                    help="start-up: recorded opening steps then hand-over (default), or fade in from standing")
     p.add_argument("--blend", type=float, default=1.0, metavar="S", help="hand-over cross-fade (s)")

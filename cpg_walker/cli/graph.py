@@ -15,10 +15,10 @@ ALIASES = {"sim": "sim_node", "pid": "pid_node", "cpg": "cpg_node", "player": "t
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("graph", help="run the ROS node graph in the foreground (like `ros2 launch`)")
-    p.add_argument("--pacing", choices=PACINGS, default="realtime",
-                   help="the sim node's pacing (default realtime)")
-    p.add_argument("--duration", type=float, default=0.0, metavar="S",
-                   help="sim seconds, then everything stops (default 0: until Ctrl-C)")
+    p.add_argument("--pacing", choices=PACINGS, default=None,
+                   help="the sim node's pacing (default: config/sim.yaml's)")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="sim seconds, then everything stops; 0: until Ctrl-C (default: config/sim.yaml's)")
     p.add_argument("--zeta", type=float, default=None, metavar="Z",
                    help=f"cpg_node's zeta, in [{ZETA_RANGE[0]:g}, {ZETA_RANGE[1]:g}]")
     p.add_argument("--alpha", type=float, default=None, metavar="A",

@@ -13,14 +13,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("walk", help="CPG walk through the ROS graph (three node processes); write walk.json")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--duration", type=float, default=60.0, metavar="S", help="sim seconds (default 60)")
-    p.add_argument("--zeta", type=float, default=1.0, metavar="Z",
-                   help="frequency ratio of the oscillators, in [{:g}, {:g}] (default 1)".format(*ZETA_RANGE))
-    p.add_argument("--alpha", type=float, default=1.0, metavar="A",
-                   help="amplitude (step length) scale, in [{:g}, {:g}] (default 1)".format(*ALPHA_RANGE))
+    p.add_argument("--zeta", type=float, default=None, metavar="Z",
+                   help="frequency ratio of the oscillators, in [{:g}, {:g}] (default: cpg_node's, "
+                        "config/cpg.yaml)".format(*ZETA_RANGE))
+    p.add_argument("--alpha", type=float, default=None, metavar="A",
+                   help="amplitude (step length) scale, in [{:g}, {:g}] (default: cpg_node's, "
+                        "config/cpg.yaml)".format(*ALPHA_RANGE))
     p.add_argument("--feedback", choices=("on", "off"), default="off",
                    help="sensory feedback (eqs 14-20): not in cpg_node yet (in-process: cpg-walk --feedback)")
-    p.add_argument("--cpg-file", default="cpg_humanoid.yaml", metavar="FILE",
-                   help="learned CPG YAML (default config/cpg_humanoid.yaml, N=3; '' = cpg_node learns it)")
+    p.add_argument("--cpg-file", default=None, metavar="FILE",
+                   help="learned CPG YAML (default: cpg_node's cpg_file, config/cpg.yaml; '' = cpg_node "
+                        "learns it)")
     p.add_argument("--pacing", choices=PACINGS, default="lockstep",
                    help="the sim node's pacing (default lockstep: deterministic)")
     p.set_defaults(func=_run)

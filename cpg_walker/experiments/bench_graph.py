@@ -1,10 +1,10 @@
 """Benchmark section ``graph``: the ROS graph's speed (registered in experiments/bench.py SECTIONS).
 
 Measures, each in its own isolated DDS domain with real node processes:
-  * real-time factor of sim_node + pid_node (standing, 500 Hz control, 1 kHz physics) in each pacing;
+  * real-time factor of sim_node + pid_node (standing, config/sim.yaml's control period) in each pacing;
   * the walk through the three-process graph (with target_player_node) in lockstep and real time;
   * the CPG walk (with cpg_node) in real time and lockstep, and cpg_node's loop timing at its rate: wall
-    period between consecutive /clock ticks, its jitter against the nominal 2 ms period (meaningful in
+    period between consecutive /clock ticks, its jitter against the nominal control period (meaningful in
     real time), work per tick, overruns (from the node's stats at exit, runtime.TickStats);
   * the stretch goal: lockstep at a 1 ms control period (1 kHz);
   * latency from publishing a /joint_states sample to the sim taking the torque that answers it (p50/p99,
@@ -33,15 +33,16 @@ def _node_stats(log: str) -> dict:
     return json.loads(m[-1]) if m else {}
 
 
-def graph_run(pacing: str, duration: float, target: str | None = None, control_period: float = 0.002,
+def graph_run(pacing: str, duration: float, target: str | None = None, control_period: float | None = None,
               work: Path | None = None) -> dict:
     """One run of the graph (sim + PID, with ``target`` node if given); the sim exits after ``duration``
-    sim seconds. With cpg_node, ``cpg_tick`` is its loop timing (wall period between consecutive /clock
-    ticks vs the nominal control period, work per tick, overruns) from its stats at exit."""
+    sim seconds; ``control_period`` None: config/sim.yaml's. With cpg_node, ``cpg_tick`` is its loop
+    timing (wall period between consecutive /clock ticks vs the nominal control period, work per tick,
+    overruns) from its stats at exit."""
     from cpg_walker.experiments.replay_graph import run_graph
 
     work = Path(tempfile.mkdtemp(prefix="bench_graph_")) if work is None else work
-    tag = f"{pacing}_{target or 'stand'}_{round(control_period * 1e6)}us"
+    tag = f"{pacing}_{target or 'stand'}_{round(control_period * 1e6) if control_period else 'nominal'}"
     run = run_graph(work, target, duration=duration, pacing=pacing, control_period=control_period,
                     timeout=60 + 20 * duration, tag=tag)
     rec, s = run.record, run.record.stats
@@ -51,7 +52,7 @@ def graph_run(pacing: str, duration: float, target: str | None = None, control_p
         cpu[name] = stats.get("cpu_fraction")
     out = {
         "real_time_factor": s["real_time_factor"], "sim_s": s["sim_s"], "wall_s": s["wall_s"],
-        "control_hz": round(1.0 / control_period), "latency_ms": s["latency"],
+        "control_hz": round(1.0 / run.control_period), "latency_ms": s["latency"],
         "late_commands": s["late_commands"], "torque_age_mean_ms": round(s["torque_age_s"]["mean"] * 1e3, 3),
         "cpu_core_fraction": cpu, "fell": rec.fell,
         "distance_m": round(float(rec.base_xy[-1][0] - rec.base_xy[0][0]), 4) if rec.base_xy else None,
@@ -62,17 +63,20 @@ def graph_run(pacing: str, duration: float, target: str | None = None, control_p
 
 
 def inprocess_baseline(duration: float) -> dict:
-    """The same physics + PID law at 500 Hz in one process, no ROS: the ceiling of the graph."""
+    """The same physics + PID law at the control period in one process, no ROS: the graph's ceiling."""
     from cpg_walker.robot.hoap2 import Hoap2Sim, default_standing_posture
     from cpg_walker.robot.pid import PidLaw
+    from cpg_walker.walker.loop import control_period
 
     sim, pid = Hoap2Sim(), PidLaw.from_config()
     target, zero = default_standing_posture(), np.zeros(25)
-    n = round(duration / 0.002)
+    period = control_period()
+    steps = round(period / sim.dt)
+    n = round(duration / period)
     t0 = time.perf_counter()
     for _ in range(n):
-        tau = pid.step(target, zero, sim.joint_positions(), sim.joint_velocities(), 0.002)
-        sim.step(tau, 2)
+        tau = pid.step(target, zero, sim.joint_positions(), sim.joint_velocities(), period)
+        sim.step(tau, steps)
     wall = time.perf_counter() - t0
     return {"real_time_factor": round(duration / wall, 2), "per_period_us": round(wall / n * 1e6, 1)}
 
@@ -84,12 +88,13 @@ def per_period_costs(n: int = 1000) -> dict:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from cpg_walker.nodes import sim_node
     from cpg_walker.nodes.graph import random_domain_id
+    from cpg_walker.nodes.runtime import params_file
+    from cpg_walker.nodes.sim_node import SimNode
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     rclpy.init(domain_id=random_domain_id(), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    node = sim_node._make_node()
+    node = SimNode(cli_args=["--ros-args", "--params-file", str(params_file("sim"))])
 
     def timed(fn) -> float:
         samples = []
@@ -105,7 +110,7 @@ def per_period_costs(n: int = 1000) -> dict:
     k = [0]
 
     def publish():
-        node.publish_state(k[0] * 2_000_000)
+        node.publish_state(k[0] * node.period_ns)
         k[0] += 1
 
     out = {
@@ -124,9 +129,12 @@ def per_period_costs(n: int = 1000) -> dict:
 def run(quick: bool = False) -> dict:
     d = 3.0 if quick else 10.0
     d_cpg = 10.0 if quick else 20.0
+    from cpg_walker.robot.hoap2 import Hoap2Sim
+    from cpg_walker.walker.loop import control_period
+
     work = Path(tempfile.mkdtemp(prefix="bench_graph_"))
     result: dict = {
-        "setup": {"physics_dt_s": 0.001, "control_period_s": 0.002, "sim_s_per_run": d,
+        "setup": {"physics_dt_s": Hoap2Sim().dt, "control_period_s": control_period(), "sim_s_per_run": d,
                   "sim_s_per_cpg_run": d_cpg,
                   "note": "sim_node + pid_node standing unless stated; each run in its own DDS domain"},
         "baseline_inprocess": inprocess_baseline(d),

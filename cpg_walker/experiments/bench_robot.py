@@ -10,7 +10,7 @@ import numpy as np
 
 from cpg_walker.robot.gait_data import GaitPlayback, load_gait
 from cpg_walker.robot.hoap2 import Hoap2Sim
-from cpg_walker.robot.pid import PidLaw, load_pid_config
+from cpg_walker.robot.pid import PidLaw
 from cpg_walker.walker.loop import run_replay
 
 
@@ -29,16 +29,14 @@ def run(quick: bool = False) -> dict:
     repeats = 3 if quick else 7
     steps = 1000 if quick else 5000
     step_us = statistics.median(_step_cost_us(sim, steps) for _ in range(repeats))
-    cfg = load_pid_config()
     duration = 5.0 if quick else 30.0
     rtf = []
     for _ in range(1 if quick else 3):
         sim.reset()
         source = GaitPlayback(load_gait("walk"))
-        pid = PidLaw.from_config(config=cfg)
+        pid = PidLaw.from_config()
         started = time.perf_counter()
-        result = run_replay(sim, source, pid, duration, rate_hz=float(cfg["rate_hz"]),
-                            delay_s=float(cfg["delay_s"]))
+        result = run_replay(sim, source, pid, duration)
         rtf.append(result.duration_s / (time.perf_counter() - started))
     return {
         "physics_timestep_s": sim.dt,

@@ -18,31 +18,33 @@ import numpy as np
 from cpg_walker.walker.controller import HumanoidCPG
 from cpg_walker.walker.feedback import FeedbackController
 from cpg_walker.walker.gait_source import CPGGaitSource, FeedbackGaitSource
-from cpg_walker.walker.learning import load_controller
+from cpg_walker.walker.learning import cpg_defaults, load_controller
 from cpg_walker.walker.loop import run_replay, summarize
 
 
-def walk(ctrl: HumanoidCPG, duration: float, zeta: float = 1.0, alpha: float = 1.0,
+def walk(ctrl: HumanoidCPG, duration: float, zeta: float | None = None, alpha: float | None = None,
          transition: str = "recording", blend_s: float = 1.0, handover_s: float | None = None,
          schedule: list[tuple[float, float, float]] | None = None, on_log=None, progress=None,
          feedback: FeedbackController | None = None) -> dict:
     """One walk from standing; returns the replay metrics plus the run's settings. With `feedback`
     (cpg/feedback.py) the source observes the IMU tilt and sole loads and closes the chosen pathways
-    after the hand-over cross-fade (an empty pathway tuple only observes: calibration)."""
+    after the hand-over cross-fade (an empty pathway tuple only observes: calibration). ``zeta``/``alpha``
+    None: cpg_node's (config/cpg.yaml, ``cpg_defaults``)."""
     from cpg_walker.robot.hoap2 import Hoap2Sim
-    from cpg_walker.robot.pid import PidLaw, load_pid_config
+    from cpg_walker.robot.pid import PidLaw
 
     if not (duration > 0 and math.isfinite(duration)):
         raise ValueError(f"--duration must be a positive number of seconds, got {duration}")
+    defaults = cpg_defaults()
+    zeta = float(defaults["zeta"]) if zeta is None else zeta
+    alpha = float(defaults["alpha"]) if alpha is None else alpha
     kw = dict(transition=transition, handover_s=handover_s, blend_s=blend_s, schedule=schedule, zeta=zeta,
               alpha=alpha)
     source = CPGGaitSource(ctrl, **kw) if feedback is None else FeedbackGaitSource(ctrl, feedback, **kw)
-    cfg = load_pid_config()
     sim = Hoap2Sim()
     sim.reset()
-    pid = PidLaw.from_config(config=cfg)
-    result = run_replay(sim, source, pid, duration, rate_hz=float(cfg.get("rate_hz", 500)),
-                        delay_s=float(cfg.get("delay_s", 0.002)), progress=progress, on_log=on_log)
+    pid = PidLaw.from_config()
+    result = run_replay(sim, source, pid, duration, progress=progress, on_log=on_log)
     m = summarize(result, period_s=ctrl.period / abs(zeta) if zeta else None)
     m.update({
         "zeta": zeta, "alpha": alpha, "feedback": bool(feedback is not None and feedback.pathways),
@@ -89,15 +91,19 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float = 1.0, alpha: float = 1
     return m
 
 
-def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float = 1.0, alpha: float = 1.0,
+def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float | None = None, alpha: float | None = None,
                  n_oscillators: int | None = None, cpg_file: str | None = None, transition: str = "recording",
                  blend_s: float = 1.0, schedule: list[tuple[float, float, float]] | None = None,
                  render: bool = True, progress_enabled: bool = True,
                  pathways: tuple[str, ...] | None = None) -> dict:
     """`cpg-walker cpg-walk`: walk, write DIR/walk.json and DIR/filmstrip.png. `pathways` (None = no
-    feedback) closes those feedback pathways with config/feedback.yaml."""
+    feedback) closes those feedback pathways with config/feedback.yaml. ``zeta``/``alpha`` None: cpg_node's
+    (config/cpg.yaml)."""
     from cpg_walker.progress import Progress
 
+    defaults = cpg_defaults()
+    zeta = float(defaults["zeta"]) if zeta is None else zeta
+    alpha = float(defaults["alpha"]) if alpha is None else alpha
     load = load_controller(cpg_file, n_oscillators) if cpg_file else _default_controller(n_oscillators)
     ctrl, origin, _ = load
     out = Path(out_dir)
@@ -133,8 +139,9 @@ def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float = 1.0, alpha:
 
 
 def _default_controller(n_oscillators: int | None) -> tuple[HumanoidCPG, str, bool]:
-    """The packaged learned CPG if it has the requested N, else learn one with that N now."""
-    ctrl, origin, converged = load_controller()
+    """The default learned CPG (cpg_node's ``cpg_file``) if it has the requested N, else learn one with
+    that N now."""
+    ctrl, origin, converged = load_controller(cpg_defaults()["cpg_file"])
     if n_oscillators is None or ctrl.net.N == n_oscillators:
         return ctrl, origin, converged
     return load_controller(None, n_oscillators)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from cpg_walker.experiments.cpg_walk import walk
 from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig, FeedbackController
-from cpg_walker.walker.learning import load_controller
+from cpg_walker.walker.learning import cpg_defaults, load_controller
 
 ZETAS = (0.8, 1.0, 1.1, 1.2, 1.3, 1.5)
 #: condition name -> (pathways, config overrides); "off" = open loop (no observe at all)
@@ -46,7 +46,7 @@ def calibrate(ctrl) -> dict:
 
 def run_sweep(out_dir: str, zetas=ZETAS, conditions: list[str] | None = None, duration: float = 40.0,
               do_calibrate: bool = False, log=print) -> dict:
-    ctrl, origin, _ = load_controller()
+    ctrl, origin, _ = load_controller(cpg_defaults()["cpg_file"])
     conds = conditions or list(CONDITIONS)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from cpg_walker.robot.hoap2 import Hoap2Sim
 from cpg_walker.robot.pid import PidLaw
-from cpg_walker.walker.loop import recording_setup, run_replay, summarize
+from cpg_walker.walker.loop import control_period, recording_setup, run_replay, summarize
 
 
 def replay_recording(
@@ -22,13 +22,11 @@ def replay_recording(
 
     from cpg_walker.progress import Progress
     from cpg_walker.robot.gait_data import GaitPlayback
-    from cpg_walker.robot.pid import load_pid_config
 
     recording, duration, cycle = recording_setup(gait, data, duration)
     source = GaitPlayback(recording, cycle=cycle)
-    pid_cfg = load_pid_config()
     sim = Hoap2Sim()
-    pid = PidLaw.from_config(config=pid_cfg)
+    pid = PidLaw.from_config()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     grabber = None
@@ -37,7 +35,7 @@ def replay_recording(
 
         grabber = FrameGrabber(sim.model, every_s=0.2, width=400, height=300)
     progress = Progress(duration, f"replay {recording.name}", enabled=progress_enabled)
-    rate, delay = float(pid_cfg.get("rate_hz", 500)), float(pid_cfg.get("delay_s", 0.002))
+    rate, delay = 1.0 / control_period(), control_period()  # run_replay's defaults, for the report
     result = run_replay(sim, source, pid, duration, rate_hz=rate, delay_s=delay, progress=progress,
                         on_log=grabber)
     progress.close()

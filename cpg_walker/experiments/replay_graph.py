@@ -49,7 +49,7 @@ class GraphRun:
     record: object  # robot.run_record.RunRecord
     target: str | None
     pacing: str
-    control_period: float
+    control_period: float  # s, the sim's (from its record)
     wall_s: float
     cpu_s: dict[str, float | None]
     logs: dict[str, str]
@@ -88,13 +88,15 @@ def run_graph(
     *,
     duration: float,
     pacing: str = "lockstep",
-    control_period: float = 0.002,
+    control_period: float | None = None,
     stop_on_fall: bool = True,
     timeout: float,
     pid_params: dict | None = None,
     tag: str = "graph",
 ) -> GraphRun:
     """Run sim_node + pid_node (+ ``target`` node with ``target_params``) for ``duration`` sim seconds.
+    Each node gets its parameters file (config/<node>.yaml), then these arguments as overrides
+    (``control_period`` None: the file's).
 
     The sim records the run to ``work_dir/<tag>_record.json``; node logs go to ``work_dir/<tag>_logs``.
     pid_node answers in lockstep when the sim does and waits for targets when there is a target node
@@ -114,8 +116,9 @@ def run_graph(
                                **(pid_params or {})})
         if target is not None:
             g.start(target, **(target_params or {}))
-        g.start("sim_node", pacing=pacing, control_period=float(control_period), duration=float(duration),
-                stop_on_fall=stop_on_fall, record_path=str(record_path))
+        period = {} if control_period is None else {"control_period": float(control_period)}
+        g.start("sim_node", pacing=pacing, duration=float(duration), stop_on_fall=stop_on_fall,
+                record_path=str(record_path), **period)
         status = g.wait("sim_node", timeout)
         cpu = {name: p.cpu_seconds() for name, p in g.procs.items() if name != "sim_node"}
         g.stop_all()
@@ -124,8 +127,9 @@ def run_graph(
     if status != 0 or not record_path.exists():
         raise RuntimeError(f"sim_node exited with status {status}; logs in {work / f'{tag}_logs'}; tail:\n"
                            f"{logs['sim_node'][-2000:]}")
-    return GraphRun(record=RunRecord.load(record_path), target=target, pacing=pacing,
-                    control_period=control_period, wall_s=wall, cpu_s=cpu, logs=logs)
+    record = RunRecord.load(record_path)
+    return GraphRun(record=record, target=target, pacing=pacing,
+                    control_period=float(record.stats["control_period_s"]), wall_s=wall, cpu_s=cpu, logs=logs)
 
 
 def run_graph_replay(
@@ -134,7 +138,7 @@ def run_graph_replay(
     data: str | None = None,
     duration: float | None = None,
     pacing: str = "lockstep",
-    control_period: float = 0.002,
+    control_period: float | None = None,
     stop_on_fall: bool = True,
     timeout: float | None = None,
 ) -> dict:

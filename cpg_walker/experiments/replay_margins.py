@@ -11,9 +11,9 @@ import json
 from pathlib import Path
 
 from cpg_walker.robot.gait_data import GaitPlayback, load_gait
-from cpg_walker.robot.hoap2 import Hoap2Sim, load_sim_config
+from cpg_walker.robot.hoap2 import Hoap2Sim
 from cpg_walker.robot.pid import PidLaw, load_pid_config
-from cpg_walker.walker.loop import run_replay
+from cpg_walker.walker.loop import control_period, run_replay
 
 SWEEPS: dict[str, list[float]] = {
     "kp": [40, 60, 80, 100, 130, 160, 200, 250, 300],
@@ -30,12 +30,12 @@ def run_point(
     gait: str, param: str | None = None, value: float | None = None, duration: float = 30.0
 ) -> dict:
     """One replay with ``param`` set to ``value`` (None: the nominal configuration)."""
-    sim_cfg = load_sim_config()
+    sim_cfg: dict = {}  # overrides of hoap2.xml's physics
     pid_cfg = load_pid_config()
-    delay = float(pid_cfg.get("delay_s", 0.002))
+    delay = None  # run_replay's default: one control period
     if param in ("kp", "kd"):
         for group in ("leg", "body"):
-            pid_cfg["groups"][group][param] = float(value)
+            pid_cfg[f"{param}.{group}"] = float(value)
     elif param == "delay_s":
         delay = float(value)
     elif param in ("friction", "armature"):
@@ -45,7 +45,7 @@ def run_point(
     sim = Hoap2Sim(sim_cfg)
     source = GaitPlayback(load_gait(gait))
     pid = PidLaw.from_config(config=pid_cfg)
-    result = run_replay(sim, source, pid, duration, rate_hz=float(pid_cfg.get("rate_hz", 500)), delay_s=delay)
+    result = run_replay(sim, source, pid, duration, delay_s=delay)
     m = result.metrics
     keys = ("fell", "fall_time_s", "distance_m", "lateral_drift_m", "heading_change_deg")
     walks = (not m["fell"]) and m["distance_m"] > MIN_SPEED_MPS * duration
@@ -69,7 +69,9 @@ def run_margins(out_dir: str | Path, quick: bool = False, duration: float = 30.0
     for param, values in sweeps.items():
         ok = [v for v in values if all(p["walks"] for p in points if p["param"] == param and p["value"] == v)]
         ranges[param] = {"both_walk": ok, "tested": values}
-    report = {"duration_s": duration, "sim": load_sim_config(), "pid": load_pid_config(), "ranges": ranges,
+    nominal = {"physics": Hoap2Sim().physics(), "control_period_s": control_period(),
+               "delay_s": control_period()}
+    report = {"duration_s": duration, "sim": nominal, "pid": load_pid_config(), "ranges": ranges,
               "points": points, "total": total}
     (out / "margins.json").write_text(json.dumps(report, indent=2) + "\n")
     _plot(points, sweeps, out / "margins.png")

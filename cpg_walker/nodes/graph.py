@@ -1,5 +1,6 @@
 """Start the ROS graph from Python (no ``ros2 launch`` needed): each node as a subprocess in its own
-process group, on an isolated DDS domain, with parameters; stopped with SIGINT, then SIGKILL.
+process group, on an isolated DDS domain, with its parameters file (config/<node name>.yaml, as the launch
+files pass it) and overrides; stopped with SIGINT, then SIGKILL.
 
     with Graph(log_dir) as g:
         g.start("sim_node", pacing="lockstep", duration=5.0)
@@ -20,7 +21,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-NODES = ("sim_node", "pid_node", "target_player_node", "cpg_node")
+from cpg_walker.nodes.runtime import NODE_NAMES, params_file
+
+NODES = tuple(NODE_NAMES)
 
 
 def random_domain_id() -> int:
@@ -128,15 +131,19 @@ class Graph:
         self.procs: dict[str, NodeProcess] = {}
 
     def command(self, node: str, params: dict) -> list[str]:
+        """The node's command line: its parameters file (config/<node name>.yaml), then ``params`` as
+        ``-p`` overrides (after the file, so they win)."""
         if node not in NODES:
             raise ValueError(f"unknown node {node!r}; known: {NODES}")
-        args = [sys.executable, "-m", f"cpg_walker.nodes.{node}", "--ros-args"]
+        args = [sys.executable, "-m", f"cpg_walker.nodes.{node}", "--ros-args",
+                "--params-file", str(params_file(NODE_NAMES[node]))]
         for name, value in {"use_sim_time": self.use_sim_time, **params}.items():
             args += ["-p", param_arg(name.replace("__", "."), value)]
         return args
 
     def start(self, node: str, **params: object) -> NodeProcess:
-        """Start ``node`` with ROS parameters (``push__force=[..]`` for ``push.force``)."""
+        """Start ``node`` with its parameters file and ``params`` overriding it (``push__force=[..]`` for
+        ``push.force``)."""
         log_path = self.log_dir / f"{node}.log"
         with open(log_path, "wb") as log:
             popen = subprocess.Popen(self.command(node, params), env=self.env, stdout=log,

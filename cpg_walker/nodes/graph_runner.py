@@ -19,8 +19,10 @@ PREFIX = {"sim_node": "sim", "pid_node": "pid", "cpg_node": "cpg", "target_playe
 
 @dataclass
 class GraphSpec:
-    pacing: str = "realtime"
-    duration: float = 0.0
+    """What ``cpg-walker graph`` was asked for; None = the node's parameters file decides."""
+
+    pacing: str | None = None
+    duration: float | None = None
     zeta: float | None = None
     alpha: float | None = None
     player: bool = False
@@ -28,20 +30,30 @@ class GraphSpec:
     params: list[tuple[str, str, object]] = field(default_factory=list)
     log_dir: str | None = None
 
+    def sim_value(self, name: str) -> object:
+        """The sim's ``pacing`` / ``duration``: as given, else its parameters file's."""
+        from cpg_walker.paths import ros_parameters
+
+        given = getattr(self, name)
+        return ros_parameters("sim.yaml", "sim")[name] if given is None else given
+
     def node_params(self) -> dict[str, dict[str, object]]:
-        """Each node's start-up parameters (validated: ValueError)."""
+        """Each node's start-up parameters, the overrides of its parameters file (validated: ValueError)."""
         from cpg_walker.nodes.runtime import PACINGS
         from cpg_walker.walker.controller import modulation_error
 
-        if self.pacing not in PACINGS:
-            raise ValueError(f"pacing must be one of {PACINGS}, got {self.pacing!r}")
-        if not (self.duration >= 0 and math.isfinite(self.duration)):
-            raise ValueError(f"--duration must be >= 0 sim seconds (0: until stopped), got {self.duration}")
+        pacing, duration = self.sim_value("pacing"), self.sim_value("duration")
+        if pacing not in PACINGS:
+            raise ValueError(f"pacing must be one of {PACINGS}, got {pacing!r}")
+        if not (duration >= 0 and math.isfinite(duration)):
+            raise ValueError(f"--duration must be >= 0 sim seconds (0: until stopped), got {duration}")
         target = "target_player_node" if self.player else "cpg_node"
+        sim = {name: (float(value) if name == "duration" else value)
+               for name, value in (("pacing", self.pacing), ("duration", self.duration)) if value is not None}
         out: dict[str, dict[str, object]] = {
-            "pid_node": {"lockstep": self.pacing == "lockstep", "wait_for_targets": True},
+            "pid_node": {"lockstep": pacing == "lockstep", "wait_for_targets": True},
             target: {},
-            "sim_node": {"pacing": self.pacing, "duration": float(self.duration)},
+            "sim_node": sim,
         }
         for name in ("zeta", "alpha"):
             value = getattr(self, name)
@@ -115,8 +127,10 @@ def _raise_stop(signum: int, _frame: object) -> None:
 
 def banner(domain: int, how: str, spec: GraphSpec, log_dir: Path) -> str:
     target = "target_player_node (recorded gait)" if spec.player else "cpg_node"
-    until = f"{spec.duration:g} sim s" if spec.duration else "until Ctrl-C"
-    lines = [f"ROS_DOMAIN_ID={domain} ({how}); sim_node + pid_node + {target}, {spec.pacing} pacing, {until}",
+    duration = spec.sim_value("duration")
+    until = f"{duration:g} sim s" if duration else "until Ctrl-C"
+    lines = [f"ROS_DOMAIN_ID={domain} ({how}); sim_node + pid_node + {target}, {spec.sim_value('pacing')} "
+             f"pacing, {until}",
              f"node logs: {log_dir}",
              "from another shell:"]
     if not spec.player:

@@ -5,11 +5,20 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+
+from cpg_walker.paths import config_path
+
+if TYPE_CHECKING:  # rclpy itself is imported where it is used: the CLI imports PACINGS from here
+    from rclpy.node import Node
 
 #: sim_node's pacings: wall-clock schedule, as fast as possible, or one period per controller answer.
 PACINGS = ("realtime", "fast", "lockstep")
+#: Each node executable's ROS node name; its parameters are config/<node name>.yaml (``params_file``).
+NODE_NAMES = {"sim_node": "sim", "pid_node": "pid", "target_player_node": "target_player", "cpg_node": "cpg"}
 
 
 def parse_cli(prog: str, description: str, interface: str, argv: list[str] | None = None) -> list[str]:
@@ -17,10 +26,12 @@ def parse_cli(prog: str, description: str, interface: str, argv: list[str] | Non
     from rclpy.utilities import remove_ros_args
 
     argv = list(sys.argv if argv is None else argv)
+    name = NODE_NAMES.get(prog, prog)
+    files = f"parameter values: config/{name}.yaml (pass it with --params-file; -p name:=value overrides one)"
     parser = argparse.ArgumentParser(
-        prog=prog, description=description, epilog=interface,
+        prog=prog, description=description, epilog=f"{interface}\n{files}",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        usage=f"{prog} [--help] [--ros-args -p name:=value ...]",
+        usage=f"{prog} [--help] --ros-args --params-file config/{name}.yaml [-p name:=value ...]",
     )
     parser.parse_args(remove_ros_args(argv)[1:])
     return argv
@@ -208,7 +219,7 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
     """rclpy.init, build the node, then ``loop(node)`` (default: spin) until Ctrl-C/SIGTERM/shutdown;
     destroy the node and shut down without a traceback. Returns the exit status."""
     import rclpy
-    from rclpy.exceptions import InvalidParameterValueException
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     rclpy.init(args=argv)
@@ -227,8 +238,8 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
                 executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ValueError, InvalidParameterValueException) as exc:  # bad parameters at start-up: one line
-        print(f"{argv[0]}: error: {exc}", file=sys.stderr)
+    except (ValueError, InvalidParameterValueException, InvalidParameterTypeException) as exc:
+        print(f"{argv[0]}: error: {exc}", file=sys.stderr)  # bad parameters at start-up: one line
         status = 2
     except Exception:
         if rclpy.ok():
@@ -248,22 +259,65 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
     return status
 
 
+def _typed(description: str, ptype: int, read_only: bool) -> ParameterDescriptor:
+    return ParameterDescriptor(description=description, read_only=read_only, type=ptype)
+
+
 def float_param(description: str, lo: float | None = None, hi: float | None = None,
                 read_only: bool = False) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=description, read_only=read_only)
+    """A double parameter, in [lo, hi] when both are given."""
+    d = _typed(description, ParameterType.PARAMETER_DOUBLE, read_only)
     if lo is not None and hi is not None:
         d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
     return d
 
 
 def int_param(description: str, lo: int, hi: int, read_only: bool = False) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=description, read_only=read_only)
+    """An integer parameter in [lo, hi]."""
+    d = _typed(description, ParameterType.PARAMETER_INTEGER, read_only)
     d.integer_range = [IntegerRange(from_value=lo, to_value=hi, step=1)]
     return d
 
 
-def plain_param(description: str, read_only: bool = False) -> ParameterDescriptor:
-    return ParameterDescriptor(description=description, read_only=read_only)
+def bool_param(description: str, read_only: bool = False) -> ParameterDescriptor:
+    return _typed(description, ParameterType.PARAMETER_BOOL, read_only)
+
+
+def str_param(description: str, read_only: bool = False) -> ParameterDescriptor:
+    return _typed(description, ParameterType.PARAMETER_STRING, read_only)
+
+
+def floats_param(description: str, read_only: bool = False) -> ParameterDescriptor:
+    return _typed(description, ParameterType.PARAMETER_DOUBLE_ARRAY, read_only)
+
+
+def declare(node: Node, name: str, descriptor: ParameterDescriptor) -> object:
+    """Declare ``name`` with the descriptor's type and no value in code, and return its value: it comes
+    from the node's parameters file (config/<node name>.yaml, ``--params-file``; the value's one home) or
+    a ``-p`` override. No value: a ValueError naming the parameter and the file to pass."""
+    from rclpy.exceptions import ParameterUninitializedException
+    from rclpy.parameter import Parameter
+
+    node.declare_parameter(name, Parameter.Type(descriptor.type), descriptor)
+    try:
+        return node.get_parameter(name).value
+    except ParameterUninitializedException:
+        raise ValueError(f"parameter {name!r} of /{node.get_name()} has no value: start the node with "
+                         f"--ros-args --params-file {params_file(node.get_name())}") from None
+
+
+def params_file(node_name: str) -> Path:
+    """The parameters file of the node named ``node_name``: config/<node_name>.yaml (in the package's share
+    directory); FileNotFoundError if there is none."""
+    return config_path(f"{node_name}.yaml")
+
+
+def override_names(node: Node, prefix: str) -> list[str]:
+    """Names under ``prefix`` (``kp.``) the node was started with (params file or ``-p``): for parameter
+    sets that are open-ended (pid_node's per-joint gains). rclpy keeps the start-up overrides in
+    ``Node._parameter_overrides`` and, unlike rclcpp (``NodeOptions::parameter_overrides``), has no public
+    accessor."""
+    return sorted(n for n in node._parameter_overrides if n.startswith(prefix))
 
 
 def latency_summary(samples_s: list[float]) -> dict:

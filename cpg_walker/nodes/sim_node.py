@@ -3,16 +3,58 @@
 The loop runs in ``main`` (not on a timer): for each control period k it publishes the state stamped
 t_k = k * control_period, services callbacks (in lockstep until the torque stamped t_k has arrived), then
 steps the physics for the period with the latest torque (zero-order hold). Pacing: ``realtime`` sleeps to
-the wall schedule, ``fast`` never waits, ``lockstep`` waits for each period's command.
+the wall schedule, ``fast`` never waits, ``lockstep`` waits for each period's command. Parameter values:
+config/sim.yaml (``--params-file``).
 """
 
 from __future__ import annotations
 
 import time
 
+import mujoco
 import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import Bool
+from std_srvs.srv import Trigger
 
-from cpg_walker.nodes.runtime import PACINGS, float_param, parse_cli, plain_param, run_main
+from cpg_walker.nodes.messages import (
+    ClockBuilder,
+    ImuBuilder,
+    JointStateBuilder,
+    OdometryBuilder,
+    WrenchBuilder,
+    read_joint_command,
+    stamp_ns,
+)
+from cpg_walker.nodes.runtime import (
+    PACINGS,
+    HotPath,
+    Throttle,
+    bool_param,
+    declare,
+    exit_log,
+    float_param,
+    floats_param,
+    latency_summary,
+    parse_cli,
+    run_main,
+    str_param,
+)
+from cpg_walker.nodes.validation import check_finite_scalar, period_ns, reason_key
+from cpg_walker.robot.contact import sole_wrenches
+from cpg_walker.robot.hoap2 import Hoap2Sim
+from cpg_walker.robot.joints import JOINT_NAMES
+from cpg_walker.robot.pusher import Pusher
+from cpg_walker.robot.run_record import RunRecord
 
 INTERFACE = """\
 publishes: /clock (rosgraph_msgs/Clock), /joint_states (sensor_msgs/JointState: position, velocity,
@@ -21,374 +63,345 @@ publishes: /clock (rosgraph_msgs/Clock), /joint_states (sensor_msgs/JointState: 
   /sim/fallen (std_msgs/Bool, latched), /diagnostics (diagnostic_msgs/DiagnosticArray)
 subscribes: /joint_torques (sensor_msgs/JointState: name + effort in N*m, stamp = the state it answers)
 services: ~/reset, ~/push (std_srvs/Trigger)
-parameters: pacing (realtime|fast|lockstep), control_period (s, 0.002), real_time_factor (1.0),
-  duration (sim s, 0 = run until stopped), stop_on_fall, wait_for_controller, lockstep_resend (wall s),
-  odom_period, diagnostics_period (sim s), imu_variance_floor, push.force [N,N,N], push.body,
-  push.duration (s), record_path, record_period (s)"""
+parameters: pacing (realtime|fast|lockstep), control_period (s), real_time_factor, duration (sim s,
+  0 = run until stopped), stop_on_fall, wait_for_controller, lockstep_resend (wall s), odom_period,
+  diagnostics_period (sim s), imu_variance_floor, push.force [N,N,N], push.body, push.duration (s),
+  record_path, record_period (s)"""
+
+#: Wall s between services of the executor (parameters, services) while the loop runs.
+SLOW_SPIN_PERIOD_S = 0.02
+#: Realtime pacing more than this many wall s behind schedule re-bases the schedule instead of
+#: catching up in a burst of periods.
+MAX_LAG_S = 0.05
+#: Publish times kept for the latency statistics (by stamp); past the limit the oldest half is dropped
+#: (answers to states that old never come).
+PUBLISHED_KEEP = 256
 
 
+class SimNode(Node):
+    """Wires parameters, topics and services to a Hoap2Sim; ``run`` is the paced loop. ``node_options``
+    go to rclpy's Node (e.g. ``cli_args=["--ros-args", "--params-file", ...]``, ``context``)."""
 
-def _make_node():
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-    from geometry_msgs.msg import WrenchStamped
-    from nav_msgs.msg import Odometry
-    from rcl_interfaces.msg import SetParametersResult
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from rosgraph_msgs.msg import Clock
-    from sensor_msgs.msg import Imu, JointState
-    from std_msgs.msg import Bool
-    from std_srvs.srv import Trigger
+    def __init__(self, **node_options) -> None:
+        super().__init__("sim", **node_options)
+        self.sim = Hoap2Sim()
 
-    from cpg_walker.nodes.messages import (
-        ClockBuilder,
-        ImuBuilder,
-        JointStateBuilder,
-        OdometryBuilder,
-        WrenchBuilder,
-        read_joint_command,
-        stamp_ns,
-    )
-    from cpg_walker.nodes.runtime import HotPath, Throttle, exit_log, latency_summary
-    from cpg_walker.nodes.validation import check_finite_scalar, period_ns, reason_key
-    from cpg_walker.robot.contact import sole_wrenches
-    from cpg_walker.robot.hoap2 import Hoap2Sim
-    from cpg_walker.robot.joints import JOINT_NAMES
-    from cpg_walker.robot.pusher import Pusher
-    from cpg_walker.robot.run_record import RunRecord
+        def p(name, descriptor):
+            return declare(self, name, descriptor)
 
-    class SimNode(Node):
-        """Wires parameters, topics and services to a Hoap2Sim; ``run`` is the paced loop."""
+        self.pacing = p("pacing", str_param("realtime | fast | lockstep", read_only=True))
+        if self.pacing not in PACINGS:
+            raise ValueError(f"pacing must be one of {PACINGS}, got {self.pacing!r}")
+        self.period_ns = period_ns(p("control_period", float_param(
+            "s between state samples / torque updates (multiple of the physics timestep)", 1e-4, 0.1,
+            read_only=True)))
+        n = self.period_ns / (self.sim.dt * 1e9)
+        if abs(n - round(n)) > 1e-6 or round(n) < 1:
+            raise ValueError(f"control_period must be a multiple of the physics timestep {self.sim.dt}")
+        self.steps_per_period = round(n)
+        self.rtf_target = float(p("real_time_factor", float_param("target sim/wall speed in realtime pacing",
+                                                                  0.01, 100.0)))
+        self.duration_ns = round(p("duration", float_param("sim s to run, then exit (0 = until stopped)",
+                                                           0.0, 1e6, read_only=True)) * 1e9)
+        self.stop_on_fall = bool(p("stop_on_fall", bool_param("exit when the robot has fallen",
+                                                               read_only=True)))
+        self.wait_first = bool(p("wait_for_controller", bool_param(
+            "hold the first period until a torque arrives (every pacing)", read_only=True)))
+        self.resend_s = float(p("lockstep_resend", float_param(
+            "wall s without an answer before the state is re-sent", 0.001, 10.0)))
+        odom = p("odom_period", float_param("sim s between ground-truth odometry messages", 0.0, 10.0,
+                                            read_only=True))
+        diag = p("diagnostics_period", float_param("sim s between /diagnostics messages", 0.01, 100.0,
+                                                   read_only=True))
+        floor = float(p("imu_variance_floor", float_param(
+            "diagonal IMU variance when the model's sensor noise is 0", 0.0, 1.0, read_only=True)))
+        p("push.force", floats_param("world-frame force (N) of ~/push"))
+        p("push.body", str_param("MJCF body name ~/push acts on (at its CoM)"))
+        p("push.duration", float_param("s of sim time ~/push lasts", 1e-4, 10.0))
+        self.record_path = p("record_path", str_param("write a JSON run record here on exit ('' = none)",
+                                                      read_only=True))
+        record_period = p("record_period", float_param("sim s between recorded samples", 1e-3, 1.0,
+                                                       read_only=True))
+        self.odom_every = max(1, round(odom * 1e9 / self.period_ns))
+        self.diag_every = max(1, round(diag * 1e9 / self.period_ns))
+        self.record = RunRecord(log_dt=self.period_ns * max(1, round(record_period * 1e9 / self.period_ns))
+                                / 1e9)
+        self.record_every = max(1, round(self.record.log_dt * 1e9 / self.period_ns))
+        self.pusher = Pusher(self.sim)
+        checked = self._on_set(self.get_parameters(["push.force", "push.body"]))  # as a later change is
+        if not checked.successful:
+            raise ValueError(checked.reason)
+        self.throttle = Throttle(1.0)
+        self.add_on_set_parameters_callback(self._on_set)
 
-        def __init__(self) -> None:
-            super().__init__("sim")
-            self.sim = Hoap2Sim()
-            p = self.declare_parameter
-            p("pacing", "realtime", plain_param("realtime | fast | lockstep", read_only=True))
-            p("control_period", 0.002, float_param("s between state samples / torque updates (multiple "
-                                                   "of the physics timestep)", 1e-4, 0.1, read_only=True))
-            p("real_time_factor", 1.0, float_param("target sim/wall speed in realtime pacing", 0.01, 100.0))
-            p("duration", 0.0, float_param("sim s to run, then exit (0 = until stopped)", 0.0, 1e6,
-                                           read_only=True))
-            p("stop_on_fall", False, plain_param("exit when the robot has fallen", read_only=True))
-            p("wait_for_controller", True, plain_param("hold the first period until a torque arrives "
-                                                       "(every pacing)", read_only=True))
-            p("lockstep_resend", 0.1, float_param("wall s without an answer before the state is re-sent",
-                                                  0.001, 10.0))
-            p("odom_period", 0.01, float_param("sim s between ground-truth odometry messages", 0.0, 10.0,
-                                               read_only=True))
-            p("diagnostics_period", 1.0, float_param("sim s between /diagnostics messages", 0.01, 100.0,
-                                                     read_only=True))
-            p("imu_variance_floor", 1e-9, float_param("diagonal IMU variance when the model's sensor noise "
-                                                      "is 0", 0.0, 1.0, read_only=True))
-            p("push.force", [0.0, 20.0, 0.0], plain_param("world-frame force (N) of ~/push"))
-            p("push.body", "torso", plain_param("MJCF body name ~/push acts on (at its CoM)"))
-            p("push.duration", 0.1, float_param("s of sim time ~/push lasts", 1e-4, 10.0))
-            p("record_path", "", plain_param("write a JSON run record here on exit ('' = none)",
-                                             read_only=True))
-            p("record_period", 0.01, float_param("sim s between recorded samples", 1e-3, 1.0,
-                                                 read_only=True))
-            g = self.get_parameter
-            self.pacing = g("pacing").value
-            if self.pacing not in PACINGS:
-                raise ValueError(f"pacing must be one of {PACINGS}, got {self.pacing!r}")
-            self.period_ns = period_ns(g("control_period").value)
-            n = self.period_ns / (self.sim.dt * 1e9)
-            if abs(n - round(n)) > 1e-6 or round(n) < 1:
-                raise ValueError(f"control_period must be a multiple of the physics timestep {self.sim.dt}")
-            self.steps_per_period = round(n)
-            self.rtf_target = float(g("real_time_factor").value)
-            self.duration_ns = round(g("duration").value * 1e9)
-            self.stop_on_fall = bool(g("stop_on_fall").value)
-            self.wait_first = bool(g("wait_for_controller").value)
-            self.resend_s = float(g("lockstep_resend").value)
-            self.odom_every = max(1, round(g("odom_period").value * 1e9 / self.period_ns))
-            self.diag_every = max(1, round(g("diagnostics_period").value * 1e9 / self.period_ns))
-            self.record_path = g("record_path").value
-            self.record = RunRecord(log_dt=self.period_ns * max(1, round(g("record_period").value * 1e9
-                                                                         / self.period_ns)) / 1e9)
-            self.record_every = max(1, round(self.record.log_dt * 1e9 / self.period_ns))
-            self.pusher = Pusher(self.sim)
-            self.throttle = Throttle(1.0)
-            self.add_on_set_parameters_callback(self._on_set)
+        self.pub_clock = self.create_publisher(Clock, "/clock", 10)
+        self.pub_js = self.create_publisher(JointState, "/joint_states", 10)
+        self.pub_imu = self.create_publisher(Imu, "/imu", 10)
+        self.pub_feet = [self.create_publisher(WrenchStamped, f"/foot_load/{s}", 10)
+                         for s in ("left", "right")]
+        self.pub_odom = self.create_publisher(Odometry, "/odom/ground_truth", 10)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.pub_fallen = self.create_publisher(Bool, "/sim/fallen", latched)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.hot = HotPath(self, [self.create_subscription(JointState, "/joint_torques",
+                                                           self._on_torque, 10)])
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(Trigger, "~/push", self._on_push)
 
-            self.pub_clock = self.create_publisher(Clock, "/clock", 10)
-            self.pub_js = self.create_publisher(JointState, "/joint_states", 10)
-            self.pub_imu = self.create_publisher(Imu, "/imu", 10)
-            self.pub_feet = [self.create_publisher(WrenchStamped, f"/foot_load/{s}", 10)
-                             for s in ("left", "right")]
-            self.pub_odom = self.create_publisher(Odometry, "/odom/ground_truth", 10)
-            latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
-            self.pub_fallen = self.create_publisher(Bool, "/sim/fallen", latched)
-            self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-            self.hot = HotPath(self, [self.create_subscription(JointState, "/joint_torques",
-                                                               self._on_torque, 10)])
-            self.create_service(Trigger, "~/reset", self._on_reset)
-            self.create_service(Trigger, "~/push", self._on_push)
+        noise = {n: float(self.sim.model.sensor_noise[i]) for n, i in self._sensor_ids().items()}
+        var = {n: (s * s if s > 0 else floor) for n, s in noise.items()}
+        self.b_clock = ClockBuilder()
+        self.b_js = JointStateBuilder(JOINT_NAMES)
+        self.b_imu = ImuBuilder("imu", var["imu_quat"], var["imu_gyro"], var["imu_accel"])
+        self.b_feet = [WrenchBuilder("lleg_sole"), WrenchBuilder("rleg_sole")]
+        self.b_odom = OdometryBuilder("world", "torso")
 
-            floor = float(g("imu_variance_floor").value)
-            noise = {n: float(self.sim.model.sensor_noise[i]) for n, i in self._sensor_ids().items()}
-            var = {n: (s * s if s > 0 else floor) for n, s in noise.items()}
-            self.b_clock = ClockBuilder()
-            self.b_js = JointStateBuilder(JOINT_NAMES)
-            self.b_imu = ImuBuilder("imu", var["imu_quat"], var["imu_gyro"], var["imu_accel"])
-            self.b_feet = [WrenchBuilder("lleg_sole"), WrenchBuilder("rleg_sole")]
-            self.b_odom = OdometryBuilder("world", "torso")
-            self._diag_types = (DiagnosticArray, DiagnosticStatus, KeyValue, Bool)
+        self.executor_ = SingleThreadedExecutor()
+        self.executor_.add_node(self)
+        self.next_slow = 0.0
+        self.tau = np.zeros(len(JOINT_NAMES))
+        self.tau_stamp = -1
+        self.published_at: dict[int, float] = {}
+        self.latencies: list[float] = []
+        self.late = 0
+        self.resends = 0
+        self.torque_age: list[int] = []
+        self.fallen = False
+        self.k = 0
+        self.wall_start = None
+        self.cpu_start = 0.0
+        self.wall_end = None
+        self._publish_fallen()
 
-            self.executor_ = SingleThreadedExecutor()
-            self.executor_.add_node(self)
-            self.next_slow = 0.0
-            self.tau = np.zeros(len(JOINT_NAMES))
-            self.tau_stamp = -1
-            self.published_at: dict[int, float] = {}
-            self.latencies: list[float] = []
-            self.late = 0
-            self.resends = 0
-            self.torque_age: list[int] = []
-            self.fallen = False
-            self.k = 0
-            self.wall_start = None
-            self.cpu_start = 0.0
-            self.wall_end = None
-            self._publish_fallen()
+    def _sensor_ids(self) -> dict[str, int]:
+        m = self.sim.model
+        return {n: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, n)
+                for n in ("imu_gyro", "imu_accel", "imu_quat")}
 
-        def _sensor_ids(self) -> dict[str, int]:
-            import mujoco
-
-            m = self.sim.model
-            return {n: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, n)
-                    for n in ("imu_gyro", "imu_accel", "imu_quat")}
-
-        # ------------------------------------------------------------------------------- callbacks
-        def _on_set(self, params) -> SetParametersResult:
-            for prm in params:
-                try:
-                    if prm.name == "real_time_factor":
-                        self.rtf_target = check_finite_scalar(prm.name, prm.value, 0.01, 100.0)
-                    elif prm.name == "push.force":
-                        f = np.asarray(list(prm.value or []), dtype=float)
-                        if f.shape != (3,) or not np.all(np.isfinite(f)):
-                            raise ValueError("push.force must be 3 finite numbers (N, world frame)")
-                    elif prm.name == "push.duration":
-                        check_finite_scalar(prm.name, prm.value, 1e-4, 10.0)
-                    elif prm.name == "push.body":
-                        self.pusher.body_id(str(prm.value))
-                    elif prm.name == "lockstep_resend":
-                        self.resend_s = check_finite_scalar(prm.name, prm.value, 0.001, 10.0)
-                except (ValueError, TypeError) as exc:
-                    return SetParametersResult(successful=False, reason=str(exc))
-            return SetParametersResult(successful=True)
-
-        def _on_torque(self, msg: JointState) -> None:
+    # ------------------------------------------------------------------------------- callbacks
+    def _on_set(self, params) -> SetParametersResult:
+        for prm in params:
             try:
-                cmd = read_joint_command(msg, require="effort")
-            except ValueError as exc:
-                self.throttle.warn(self, reason_key(exc),
-                                   f"rejected /joint_torques: {exc}")
-                return
-            t = stamp_ns(msg)
-            if t < self.tau_stamp:
-                return  # an older answer arriving late: ignore
-            if t != self.tau_stamp:
-                sent = self.published_at.get(t)
-                if sent is not None:
-                    self.latencies.append(time.perf_counter() - sent)
-            tau = np.zeros(len(JOINT_NAMES))
-            tau[cmd.index] = cmd.effort
-            self.tau, self.tau_stamp = tau, t
+                if prm.name == "real_time_factor":
+                    self.rtf_target = check_finite_scalar(prm.name, prm.value, 0.01, 100.0)
+                elif prm.name == "push.force":
+                    f = np.asarray(list(prm.value or []), dtype=float)
+                    if f.shape != (3,) or not np.all(np.isfinite(f)):
+                        raise ValueError("push.force must be 3 finite numbers (N, world frame)")
+                elif prm.name == "push.duration":
+                    check_finite_scalar(prm.name, prm.value, 1e-4, 10.0)
+                elif prm.name == "push.body":
+                    self.pusher.body_id(str(prm.value))
+                elif prm.name == "lockstep_resend":
+                    self.resend_s = check_finite_scalar(prm.name, prm.value, 0.001, 10.0)
+            except (ValueError, TypeError) as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
 
-        def _on_reset(self, request, response):
-            self.sim.reset()
-            self.pusher.clear()
-            self.fallen = False
-            self._publish_fallen()
-            response.success = True
-            response.message = f"reset to standing at sim time {self.k * self.period_ns / 1e9:.3f} s"
+    def _on_torque(self, msg: JointState) -> None:
+        try:
+            cmd = read_joint_command(msg, require="effort")
+        except ValueError as exc:
+            self.throttle.warn(self, reason_key(exc),
+                               f"rejected /joint_torques: {exc}")
+            return
+        t = stamp_ns(msg)
+        if t < self.tau_stamp:
+            return  # an older answer arriving late: ignore
+        if t != self.tau_stamp:
+            sent = self.published_at.get(t)
+            if sent is not None:
+                self.latencies.append(time.perf_counter() - sent)
+        tau = np.zeros(len(JOINT_NAMES))
+        tau[cmd.index] = cmd.effort
+        self.tau, self.tau_stamp = tau, t
+
+    def _on_reset(self, request, response):
+        self.sim.reset()
+        self.pusher.clear()
+        self.fallen = False
+        self._publish_fallen()
+        response.success = True
+        response.message = f"reset to standing at sim time {self.k * self.period_ns / 1e9:.3f} s"
+        return response
+
+    def _on_push(self, request, response):
+        g = self.get_parameter
+        try:
+            force = np.asarray(list(g("push.force").value), dtype=float)
+            body, dur = str(g("push.body").value), float(g("push.duration").value)
+            self.pusher.push(body, force, dur)
+        except ValueError as exc:
+            response.success, response.message = False, str(exc)
             return response
+        response.success = True
+        response.message = f"pushing {body} with {force.tolist()} N for {dur} s"
+        return response
 
-        def _on_push(self, request, response):
-            g = self.get_parameter
-            try:
-                force = np.asarray(list(g("push.force").value), dtype=float)
-                body, dur = str(g("push.body").value), float(g("push.duration").value)
-                self.pusher.push(body, force, dur)
-            except ValueError as exc:
-                response.success, response.message = False, str(exc)
-                return response
-            response.success = True
-            response.message = f"pushing {body} with {force.tolist()} N for {dur} s"
-            return response
+    # ------------------------------------------------------------------------------ publishing
+    def _publish_fallen(self) -> None:
+        self.pub_fallen.publish(Bool(data=self.fallen))
 
-        # ------------------------------------------------------------------------------ publishing
-        def _publish_fallen(self) -> None:
-            self.pub_fallen.publish(self._diag_types[3](data=self.fallen))
+    def publish_state(self, t_ns: int) -> None:
+        sim = self.sim
+        msg = self.b_js.fill(t_ns, sim.data.qpos[sim._qadr], sim.data.qvel[sim._dadr],
+                             sim.data.actuator_force[sim._act])
+        self.published_at[t_ns] = time.perf_counter()
+        self.pub_js.publish(msg)
+        self.pub_clock.publish(self.b_clock.fill(t_ns))
+        imu = sim.imu()
+        self.pub_imu.publish(self.b_imu.fill(t_ns, imu.gyro, imu.accel, imu.quat))
+        for pub, b, (f, tq) in zip(self.pub_feet, self.b_feet, sole_wrenches(sim), strict=True):
+            pub.publish(b.fill(t_ns, f, tq))
+        if self.k % self.odom_every == 0:
+            pos, quat = sim.base_pose()
+            lin, ang = sim.base_velocity()
+            self.pub_odom.publish(self.b_odom.fill(t_ns, pos, quat, lin, ang))
+        if self.k % self.diag_every == 0:
+            self._publish_diagnostics(t_ns)
+        if len(self.published_at) > PUBLISHED_KEEP:
+            for key in sorted(self.published_at)[:PUBLISHED_KEEP // 2]:
+                del self.published_at[key]
 
-        def publish_state(self, t_ns: int) -> None:
-            sim = self.sim
-            msg = self.b_js.fill(t_ns, sim.data.qpos[sim._qadr], sim.data.qvel[sim._dadr],
-                                 sim.data.actuator_force[sim._act])
-            self.published_at[t_ns] = time.perf_counter()
-            self.pub_js.publish(msg)
-            self.pub_clock.publish(self.b_clock.fill(t_ns))
-            imu = sim.imu()
-            self.pub_imu.publish(self.b_imu.fill(t_ns, imu.gyro, imu.accel, imu.quat))
-            for pub, b, (f, tq) in zip(self.pub_feet, self.b_feet, sole_wrenches(sim), strict=True):
-                pub.publish(b.fill(t_ns, f, tq))
-            if self.k % self.odom_every == 0:
-                pos, quat = sim.base_pose()
-                lin, ang = sim.base_velocity()
-                self.pub_odom.publish(self.b_odom.fill(t_ns, pos, quat, lin, ang))
-            if self.k % self.diag_every == 0:
-                self._publish_diagnostics(t_ns)
-            if len(self.published_at) > 256:
-                for key in sorted(self.published_at)[:128]:
-                    del self.published_at[key]
+    def resend_state(self, t_ns: int) -> None:
+        sim = self.sim
+        self.pub_clock.publish(self.b_clock.fill(t_ns))
+        self.pub_js.publish(self.b_js.fill(t_ns, sim.data.qpos[sim._qadr], sim.data.qvel[sim._dadr],
+                                           sim.data.actuator_force[sim._act]))
+        self.resends += 1
 
-        def resend_state(self, t_ns: int) -> None:
-            sim = self.sim
-            self.pub_clock.publish(self.b_clock.fill(t_ns))
-            self.pub_js.publish(self.b_js.fill(t_ns, sim.data.qpos[sim._qadr], sim.data.qvel[sim._dadr],
-                                               sim.data.actuator_force[sim._act]))
-            self.resends += 1
+    def achieved_rtf(self) -> float:
+        if self.wall_start is None:
+            return 0.0
+        wall = (self.wall_end or time.perf_counter()) - self.wall_start
+        return (self.k * self.period_ns / 1e9) / wall if wall > 0 else 0.0
 
-        def achieved_rtf(self) -> float:
-            if self.wall_start is None:
-                return 0.0
-            wall = (self.wall_end or time.perf_counter()) - self.wall_start
-            return (self.k * self.period_ns / 1e9) / wall if wall > 0 else 0.0
+    def _publish_diagnostics(self, t_ns: int) -> None:
+        st = DiagnosticStatus(name="cpg_walker/sim", hardware_id="mujoco_hoap2")
+        st.level = DiagnosticStatus.ERROR if self.fallen else DiagnosticStatus.OK
+        st.message = "fallen" if self.fallen else "ok"
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in (
+            ("sim_time_s", f"{t_ns / 1e9:.3f}"), ("pacing", self.pacing),
+            ("real_time_factor", f"{self.achieved_rtf():.3f}"), ("fallen", self.fallen),
+            ("fall_criterion", f"torso z < {self.sim.min_torso_height} m or tilt > "
+                               f"{self.sim.max_tilt_deg} deg"),
+            ("late_commands", self.late), ("resends", self.resends))]
+        msg = DiagnosticArray(status=[st])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+        self.pub_diag.publish(msg)
 
-        def _publish_diagnostics(self, t_ns: int) -> None:
-            DiagnosticArray, DiagnosticStatus, KeyValue, _ = self._diag_types
-            st = DiagnosticStatus(name="cpg_walker/sim", hardware_id="mujoco_hoap2")
-            st.level = DiagnosticStatus.ERROR if self.fallen else DiagnosticStatus.OK
-            st.message = "fallen" if self.fallen else "ok"
-            st.values = [KeyValue(key=k, value=str(v)) for k, v in (
-                ("sim_time_s", f"{t_ns / 1e9:.3f}"), ("pacing", self.pacing),
-                ("real_time_factor", f"{self.achieved_rtf():.3f}"), ("fallen", self.fallen),
-                ("fall_criterion", f"torso z < {self.sim.min_torso_height} m or tilt > "
-                                   f"{self.sim.max_tilt_deg} deg"),
-                ("late_commands", self.late), ("resends", self.resends))]
-            msg = DiagnosticArray(status=[st])
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
-            self.pub_diag.publish(msg)
-
-        # ------------------------------------------------------------------------------------ loop
-        def _wait_for_torque(self, t_ns: int) -> bool:
-            """Spin until the torque stamped t_ns arrived; re-send the state every ``lockstep_resend``."""
-            import rclpy
-
-            last = time.perf_counter()
-            while self.tau_stamp != t_ns:
-                if not rclpy.ok():
-                    return False
-                self.hot.poll(0.005)
-                now = time.perf_counter()
-                self.slow_spin(now)
-                if self.tau_stamp != t_ns and now - last > self.resend_s:
-                    text = f"waiting for controller: no /joint_torques stamped {t_ns / 1e9:.3f} s yet"
-                    if self.k == 0:  # start-up: the controller's discovery is still under way
-                        self.get_logger().info(text, throttle_duration_sec=2.0)
-                    else:
-                        self.get_logger().warn(text, throttle_duration_sec=2.0)
-                    self.resend_state(t_ns)
-                    last = now
-            return True
-
-        def slow_spin(self, now: float) -> None:
-            """Parameters and services, through the executor, at most every 20 ms of wall time."""
-            if now >= self.next_slow:
-                self.executor_.spin_once(timeout_sec=0.0)
-                self.next_slow = now + 0.02
-
-        def run(self) -> None:
-            import rclpy
-
-            lockstep, realtime = self.pacing == "lockstep", self.pacing == "realtime"
-            self.get_logger().info(
-                f"pacing={self.pacing} control_period={self.period_ns / 1e9} s physics={self.sim.dt} s "
-                f"({self.steps_per_period} steps/period)")
-            sched_origin = None
-            rtf_in_use = self.rtf_target
-            while rclpy.ok():
-                t_ns = self.k * self.period_ns
-                self.publish_state(t_ns)
-                if lockstep or (self.k == 0 and self.wait_first):
-                    if not self._wait_for_torque(t_ns):
-                        break
-                elif realtime:
-                    if self.rtf_target != rtf_in_use:  # re-base the schedule on a factor change
-                        sched_origin = time.perf_counter() - self.k * self.period_ns / 1e9 / self.rtf_target
-                        rtf_in_use = self.rtf_target
-                    deadline = sched_origin + (self.k + 1) * self.period_ns / 1e9 / self.rtf_target
-                    self.hot.poll(0.0)
-                    while True:
-                        remaining = deadline - time.perf_counter()
-                        if remaining <= 0 or self.tau_stamp == t_ns:
-                            break
-                        self.hot.poll(remaining)
-                    self.slow_spin(time.perf_counter())
-                    if self.tau_stamp != t_ns:
-                        self.late += 1
-                    remaining = deadline - time.perf_counter()
-                    if remaining > 0:
-                        time.sleep(remaining)
-                    elif remaining < -0.05:  # far behind: do not try to catch up in a burst
-                        sched_origin -= remaining
+    # ------------------------------------------------------------------------------------ loop
+    def _wait_for_torque(self, t_ns: int) -> bool:
+        """Spin until the torque stamped t_ns arrived; re-send the state every ``lockstep_resend``."""
+        last = time.perf_counter()
+        while self.tau_stamp != t_ns:
+            if not rclpy.ok():
+                return False
+            self.hot.poll(0.005)
+            now = time.perf_counter()
+            self.slow_spin(now)
+            if self.tau_stamp != t_ns and now - last > self.resend_s:
+                text = f"waiting for controller: no /joint_torques stamped {t_ns / 1e9:.3f} s yet"
+                if self.k == 0:  # start-up: the controller's discovery is still under way
+                    self.get_logger().info(text, throttle_duration_sec=2.0)
                 else:
-                    self.hot.poll(0.0)
-                    self.slow_spin(time.perf_counter())
-                if self.k == 0:
-                    self.cpu_start = time.process_time()
-                    self.wall_start = time.perf_counter()
-                    sched_origin = self.wall_start
-                self.torque_age.append(t_ns - self.tau_stamp)
-                self.pusher.update()
-                self.sim.step(self.tau, self.steps_per_period)
-                self.k += 1
-                t_next = self.k * self.period_ns
-                if self.k % self.record_every == 0:
-                    self.record.sample(t_next / 1e9, self.sim)
-                if not self.fallen and self.sim.has_fallen():
-                    self.fallen = True
-                    if not self.record.fell:
-                        self.record.fell, self.record.fall_time_s = True, t_next / 1e9
-                    self._publish_fallen()
-                    self._publish_diagnostics(t_next)
-                    self.get_logger().warn(f"robot has fallen at sim time {t_next / 1e9:.3f} s")
-                    if self.stop_on_fall:
+                    self.get_logger().warn(text, throttle_duration_sec=2.0)
+                self.resend_state(t_ns)
+                last = now
+        return True
+
+    def slow_spin(self, now: float) -> None:
+        """Parameters and services, through the executor, at most every SLOW_SPIN_PERIOD_S of wall time."""
+        if now >= self.next_slow:
+            self.executor_.spin_once(timeout_sec=0.0)
+            self.next_slow = now + SLOW_SPIN_PERIOD_S
+
+    def run(self) -> None:
+        lockstep, realtime = self.pacing == "lockstep", self.pacing == "realtime"
+        self.get_logger().info(
+            f"pacing={self.pacing} control_period={self.period_ns / 1e9} s physics={self.sim.dt} s "
+            f"({self.steps_per_period} steps/period)")
+        sched_origin = 0.0
+        rtf_in_use = self.rtf_target
+        while rclpy.ok():
+            t_ns = self.k * self.period_ns
+            self.publish_state(t_ns)
+            waits = lockstep or (self.k == 0 and self.wait_first)
+            if waits and not self._wait_for_torque(t_ns):
+                break
+            if self.k == 0:  # the run's clocks start now, after any start-up wait for the controller
+                self.cpu_start = time.process_time()
+                self.wall_start = time.perf_counter()
+                sched_origin = self.wall_start
+            if waits:
+                pass
+            elif realtime:
+                if self.rtf_target != rtf_in_use:  # re-base the schedule on a factor change
+                    sched_origin = time.perf_counter() - self.k * self.period_ns / 1e9 / self.rtf_target
+                    rtf_in_use = self.rtf_target
+                deadline = sched_origin + (self.k + 1) * self.period_ns / 1e9 / self.rtf_target
+                self.hot.poll(0.0)
+                while True:
+                    remaining = deadline - time.perf_counter()
+                    if remaining <= 0 or self.tau_stamp == t_ns:
                         break
-                if self.duration_ns and t_next >= self.duration_ns:
+                    self.hot.poll(remaining)
+                self.slow_spin(time.perf_counter())
+                if self.tau_stamp != t_ns:
+                    self.late += 1
+                remaining = deadline - time.perf_counter()
+                if remaining > 0:
+                    time.sleep(remaining)
+                elif remaining < -MAX_LAG_S:  # far behind: do not try to catch up in a burst
+                    sched_origin -= remaining
+            else:
+                self.hot.poll(0.0)
+                self.slow_spin(time.perf_counter())
+            self.torque_age.append(t_ns - self.tau_stamp)
+            self.pusher.update()
+            self.sim.step(self.tau, self.steps_per_period)
+            self.k += 1
+            t_next = self.k * self.period_ns
+            if self.k % self.record_every == 0:
+                self.record.sample(t_next / 1e9, self.sim)
+            if not self.fallen and self.sim.has_fallen():
+                self.fallen = True
+                if not self.record.fell:
+                    self.record.fell, self.record.fall_time_s = True, t_next / 1e9
+                self._publish_fallen()
+                self._publish_diagnostics(t_next)
+                self.get_logger().warn(f"robot has fallen at sim time {t_next / 1e9:.3f} s")
+                if self.stop_on_fall:
                     break
+            if self.duration_ns and t_next >= self.duration_ns:
+                break
+        self.wall_end = time.perf_counter()
+
+    def on_exit(self) -> None:
+        if self.wall_end is None:
             self.wall_end = time.perf_counter()
+        age = np.asarray(self.torque_age[1:] or [0]) / 1e9
+        stats = {
+            "pacing": self.pacing, "control_period_s": self.period_ns / 1e9, "physics_dt_s": self.sim.dt,
+            "periods": self.k, "sim_s": self.k * self.period_ns / 1e9,
+            "wall_s": round((self.wall_end - self.wall_start) if self.wall_start else 0.0, 4),
+            "real_time_factor": round(self.achieved_rtf(), 4), "late_commands": self.late,
+            "resends": self.resends, "cpu_s": round(time.process_time() - self.cpu_start, 3),
+            "latency": latency_summary(self.latencies[1:]),
+            "torque_age_s": {"mean": round(float(age.mean()), 6), "max": round(float(age.max()), 6)},
+        }
+        self.record.stats = stats
+        exit_log(self, f"done: {stats['sim_s']:.3f} sim s in {stats['wall_s']:.3f} wall s, "
+                               f"real-time factor {stats['real_time_factor']:.3f}")
+        if self.record_path:
+            self.record.save(self.record_path)
 
-        def on_exit(self) -> None:
-            if self.wall_end is None:
-                self.wall_end = time.perf_counter()
-            age = np.asarray(self.torque_age[1:] or [0]) / 1e9
-            stats = {
-                "pacing": self.pacing, "control_period_s": self.period_ns / 1e9, "physics_dt_s": self.sim.dt,
-                "periods": self.k, "sim_s": self.k * self.period_ns / 1e9,
-                "wall_s": round((self.wall_end - self.wall_start) if self.wall_start else 0.0, 4),
-                "real_time_factor": round(self.achieved_rtf(), 4), "late_commands": self.late,
-                "resends": self.resends, "cpu_s": round(time.process_time() - self.cpu_start, 3),
-                "latency": latency_summary(self.latencies[1:]),
-                "torque_age_s": {"mean": round(float(age.mean()), 6), "max": round(float(age.max()), 6)},
-            }
-            self.record.stats = stats
-            exit_log(self, f"done: {stats['sim_s']:.3f} sim s in {stats['wall_s']:.3f} wall s, "
-                                   f"real-time factor {stats['real_time_factor']:.3f}")
-            if self.record_path:
-                self.record.save(self.record_path)
-
-    return SimNode()
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = parse_cli("sim_node", "MuJoCo HOAP-2 simulation node (publishes /clock).", INTERFACE, argv)
-    return run_main(argv, _make_node, loop=lambda node: node.run())
+    return run_main(argv, SimNode, loop=SimNode.run)
 
 
 if __name__ == "__main__":

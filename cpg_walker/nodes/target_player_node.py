@@ -1,12 +1,32 @@
 """target_player_node: streams a recorded gait as ``/joint_targets`` (``ros2 run cpg_walker
 target_player_node``), one message per ``/clock`` tick, stamped with that tick, so it stays in step with
 the simulation in every pacing mode (event-driven on /clock, no wall timer). The recording plays from sim
-time ``start_time``, then its steady cycle repeats (cpg_walker.robot.gait_data.GaitPlayback).
+time ``start_time``, then its steady cycle repeats (cpg_walker.robot.gait_data.GaitPlayback). Parameter
+values: config/target_player.yaml (``--params-file``).
 """
 
 from __future__ import annotations
 
-from cpg_walker.nodes.runtime import float_param, parse_cli, plain_param, run_main
+import json
+
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from cpg_walker.nodes.messages import JointStateBuilder
+from cpg_walker.nodes.runtime import (
+    ActivityStats,
+    HotPath,
+    bool_param,
+    declare,
+    exit_log,
+    float_param,
+    parse_cli,
+    run_main,
+    str_param,
+)
+from cpg_walker.nodes.validation import to_ns
+from cpg_walker.robot.gait_data import Cycle, GaitPlayback, find_steady_cycle, load_gait
 
 INTERFACE = """\
 subscribes: /clock (rosgraph_msgs/Clock)
@@ -16,72 +36,60 @@ parameters: gait (walk|slow), data (CSV path, overrides gait), start_time (sim s
   the next period's target, period taken from the last two ticks)"""
 
 
-def _make_node():
-    from rclpy.node import Node
-    from rosgraph_msgs.msg import Clock
-    from sensor_msgs.msg import JointState
+class TargetPlayerNode(Node):
+    """Plays a recording (GaitPlayback) on /clock. ``node_options`` go to rclpy's Node."""
 
-    from cpg_walker.nodes.messages import JointStateBuilder
-    from cpg_walker.nodes.runtime import ActivityStats, HotPath, exit_log
-    from cpg_walker.nodes.validation import to_ns
-    from cpg_walker.robot.gait_data import Cycle, GaitPlayback, find_steady_cycle, load_gait
+    def __init__(self, **node_options) -> None:
+        super().__init__("target_player", **node_options)
+        gait = declare(self, "gait", str_param("packaged recording: walk or slow", read_only=True))
+        data = declare(self, "data", str_param("a CSV in the packaged layout (overrides gait)",
+                                               read_only=True))
+        start = declare(self, "start_time", float_param("sim s at which the recording starts", 0.0, 1e6,
+                                                        read_only=True))
+        self.lookahead = bool(declare(self, "lookahead", bool_param(
+            "also send the next period's target on each tick (period from the last two ticks)",
+            read_only=True)))
+        gait = load_gait(data or gait)
+        try:
+            cycle = find_steady_cycle(gait)
+        except ValueError:
+            cycle = Cycle(start=0.0, period=gait.duration + 1.0, mismatch_rad=float("nan"))
+        self.playback = GaitPlayback(gait, cycle=cycle)
+        self.start_ns = round(start * 1e9)
+        self.last_tick_ns: int | None = None
+        self.sent_ns: int | None = None
+        self.builder = JointStateBuilder(self.playback.names)
+        self.pub = self.create_publisher(JointState, "/joint_targets", 10)
+        self.activity = ActivityStats()
+        self.hot = HotPath(self, [self.create_subscription(Clock, "/clock", self._on_clock, 100)])
+        self.get_logger().info(f"playing {gait.name} ({gait.duration:.2f} s, then its "
+                               f"{cycle.period:.3f} s cycle) from sim time {self.start_ns / 1e9} s")
 
-    class TargetPlayerNode(Node):
-        def __init__(self) -> None:
-            super().__init__("target_player")
-            p = self.declare_parameter
-            p("gait", "walk", plain_param("packaged recording: walk or slow", read_only=True))
-            p("data", "", plain_param("a CSV in the packaged layout (overrides gait)", read_only=True))
-            p("start_time", 0.0, float_param("sim s at which the recording starts", 0.0, 1e6,
-                                             read_only=True))
-            p("lookahead", True, plain_param("also send the next period's target on each tick (period "
-                                             "from the last two ticks)", read_only=True))
-            g = self.get_parameter
-            gait = load_gait(g("data").value or g("gait").value)
-            try:
-                cycle = find_steady_cycle(gait)
-            except ValueError:
-                cycle = Cycle(start=0.0, period=gait.duration + 1.0, mismatch_rad=float("nan"))
-            self.playback = GaitPlayback(gait, cycle=cycle)
-            self.start_ns = round(g("start_time").value * 1e9)
-            self.lookahead = bool(g("lookahead").value)
-            self.last_tick_ns: int | None = None
-            self.sent_ns: int | None = None
-            self.builder = JointStateBuilder(self.playback.names)
-            self.pub = self.create_publisher(JointState, "/joint_targets", 10)
-            self.activity = ActivityStats()
-            self.hot = HotPath(self, [self.create_subscription(Clock, "/clock", self._on_clock, 100)])
-            self.get_logger().info(f"playing {gait.name} ({gait.duration:.2f} s, then its "
-                                   f"{cycle.period:.3f} s cycle) from sim time {self.start_ns / 1e9} s")
+    def _on_clock(self, msg: Clock) -> None:
+        self.activity.tick()
+        t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
+        if t_ns != self.sent_ns:  # not sent ahead (first tick, a gap) or a re-sent tick: send it
+            self._publish(t_ns)
+        if self.lookahead and self.last_tick_ns is not None and t_ns > self.last_tick_ns:
+            # the target is a function of its stamp alone, so sending the next period's now is
+            # deterministic and takes this node off the controller's critical path
+            self._publish(t_ns + (t_ns - self.last_tick_ns))
+        self.last_tick_ns = t_ns
 
-        def _on_clock(self, msg: Clock) -> None:
-            self.activity.tick()
-            t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
-            if t_ns != self.sent_ns:  # not sent ahead (first tick, a gap) or a re-sent tick: send it
-                self._publish(t_ns)
-            if self.lookahead and self.last_tick_ns is not None and t_ns > self.last_tick_ns:
-                # the target is a function of its stamp alone, so sending the next period's now is
-                # deterministic and takes this node off the controller's critical path
-                self._publish(t_ns + (t_ns - self.last_tick_ns))
-            self.last_tick_ns = t_ns
+    def _publish(self, t_ns: int) -> None:
+        q, qd = self.playback.targets(max(0, t_ns - self.start_ns) / 1e9)
+        self.pub.publish(self.builder.fill(t_ns, position=q, velocity=qd))
+        self.sent_ns = t_ns
 
-        def _publish(self, t_ns: int) -> None:
-            q, qd = self.playback.targets(max(0, t_ns - self.start_ns) / 1e9)
-            self.pub.publish(self.builder.fill(t_ns, position=q, velocity=qd))
-            self.sent_ns = t_ns
+    def on_exit(self) -> None:
+        exit_log(self, "stats " + json.dumps(self.activity.summary()))
 
-        def on_exit(self) -> None:
-            import json
-
-            exit_log(self, "stats " + json.dumps(self.activity.summary()))
-
-    return TargetPlayerNode()
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = parse_cli("target_player_node", "Streams a recorded HOAP-2 gait as /joint_targets on /clock.",
                      INTERFACE, argv)
-    return run_main(argv, _make_node)
+    return run_main(argv, TargetPlayerNode)
 
 
 if __name__ == "__main__":

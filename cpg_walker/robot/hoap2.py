@@ -15,7 +15,6 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-import yaml
 
 from cpg_walker.robot.joints import JOINT_NAMES
 
@@ -50,17 +49,12 @@ def tilt_from_quat(q: Sequence[float] | np.ndarray) -> tuple[float, float]:
     return math.atan2(-fy, up[2]), math.atan2(fx, up[2])
 
 
-def load_sim_config(path: str | Path | None = None) -> dict:
-    """``config/sim.yaml`` (or the given file) as a dict."""
-    if path is None:
-        from cpg_walker.paths import config_path
-
-        path = config_path("sim.yaml")
-    with open(path, encoding="utf-8") as fh:
-        cfg = yaml.safe_load(fh)
-    if not isinstance(cfg, dict):
-        raise ValueError(f"{path}: expected a mapping of simulation settings")
-    return cfg
+#: Fallen = torso origin below this height (m; the standing crouch is ~0.285 m) ...
+MIN_TORSO_HEIGHT_M = 0.18
+#: ... or the torso z-axis tilted more than this from vertical (deg).
+MAX_TILT_DEG = 50.0
+#: The MuJoCo settings ``Hoap2Sim(config=...)`` may override for a sweep (the model's values otherwise).
+PHYSICS_KEYS = ("timestep", "integrator", "armature", "joint_damping", "friction", "contact_solref")
 
 
 @functools.lru_cache(maxsize=1)
@@ -79,14 +73,20 @@ class _NoCycle:
 
 
 class Hoap2Sim:
-    """The HOAP-2 in MuJoCo. ``config`` overrides ``config/sim.yaml`` keys (timestep, friction, ...)."""
+    """The HOAP-2 in MuJoCo. The physics is hoap2.xml's (its one home); ``config`` overrides some of it
+    for a sweep (PHYSICS_KEYS: timestep s, integrator name, armature kg*m^2 and joint_damping N*m*s/rad
+    of every hinge, friction of every geom, contact_solref (time constant s, damping ratio) of every geom).
+    ``has_fallen``: torso origin below ``min_torso_height`` (m) or its z-axis more than ``max_tilt_deg``
+    from vertical."""
 
-    def __init__(self, config: Mapping | None = None, model_path: str | Path = MODEL_PATH):
-        cfg = load_sim_config()
-        cfg.update(config or {})
-        self.config = cfg
+    def __init__(self, config: Mapping | None = None, model_path: str | Path = MODEL_PATH,
+                 min_torso_height: float = MIN_TORSO_HEIGHT_M, max_tilt_deg: float = MAX_TILT_DEG):
+        unknown = sorted(set(config or {}) - set(PHYSICS_KEYS))
+        if unknown:
+            raise ValueError(f"Hoap2Sim config: unknown key(s) {unknown}; known: {', '.join(PHYSICS_KEYS)}")
+        self.config = dict(config or {})
         self.model = mujoco.MjModel.from_xml_path(str(model_path))
-        self._apply_config(cfg)
+        self._apply_config(self.config)
         self.data = mujoco.MjData(self.model)
         m = self.model
         self.joint_names: tuple[str, ...] = JOINT_NAMES
@@ -110,9 +110,8 @@ class Hoap2Sim:
             for i in [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, n)]
         }
         self.total_mass = float(m.body_subtreemass[self._torso])
-        fall = cfg.get("fall", {})
-        self.min_torso_height = float(fall.get("min_torso_height", 0.18))
-        self.max_tilt_deg = float(fall.get("max_tilt_deg", 50.0))
+        self.min_torso_height = float(min_torso_height)
+        self.max_tilt_deg = float(max_tilt_deg)
         self._push_until = -1.0
         self.reset()
 
@@ -132,6 +131,17 @@ class Hoap2Sim:
             m.geom_friction[:, 0] = float(cfg["friction"])
         if "contact_solref" in cfg:
             m.geom_solref[:] = np.asarray(cfg["contact_solref"], dtype=float)
+
+    def physics(self) -> dict:
+        """The physics in use (PHYSICS_KEYS; armature, damping: of the first hinge; friction, solref: of
+        the floor), read back from the compiled model."""
+        m = self.model
+        hinge = int(m.jnt_dofadr[np.flatnonzero(m.jnt_type == mujoco.mjtJoint.mjJNT_HINGE)[0]])
+        integrator = mujoco.mjtIntegrator(m.opt.integrator).name.removeprefix("mjINT_").lower()
+        return {"timestep": float(m.opt.timestep), "integrator": integrator,
+                "armature": float(m.dof_armature[hinge]), "joint_damping": float(m.dof_damping[hinge]),
+                "friction": float(m.geom_friction[self._floor, 0]),
+                "contact_solref": [float(x) for x in m.geom_solref[self._floor]]}
 
     @property
     def dt(self) -> float:
@@ -257,7 +267,7 @@ class Hoap2Sim:
         return math.atan2(R[1, 0], R[0, 0])
 
     def has_fallen(self) -> bool:
-        """Fallen = torso origin lower than ``fall.min_torso_height`` (standing crouch: 0.285 m) or the
-        torso tilted more than ``fall.max_tilt_deg`` from vertical."""
+        """Fallen = torso origin lower than ``min_torso_height`` (standing crouch: 0.285 m) or the torso
+        tilted more than ``max_tilt_deg`` from vertical (constructor arguments)."""
         z = float(self.data.qpos[2])
         return z < self.min_torso_height or self.torso_upright() < math.cos(math.radians(self.max_tilt_deg))

@@ -80,6 +80,10 @@ def joint_function(joint: str) -> str:
     raise KeyError(f"unknown HOAP-2 joint {joint!r}; known: {', '.join(JOINT_NAMES)}")
 
 
+#: The joint groups that carry their own PID gains (config/pid.yaml ``kp.leg`` ...).
+GROUPS: tuple[str, ...] = ("leg", "arm", "body", "head")
+
+
 def group_of(joint: str) -> str:
     """'leg', 'arm', 'body' or 'head' (the groups that carry their own PID gains)."""
     if joint in LEG_JOINTS:

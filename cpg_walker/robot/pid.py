@@ -15,22 +15,32 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from cpg_walker.robot.joints import JOINT_NAMES, MAX_TORQUE_NM, MAX_VELOCITY_RADS, group_of
+from cpg_walker.robot.joints import GROUPS, JOINT_NAMES, MAX_TORQUE_NM, MAX_VELOCITY_RADS, group_of
+
+#: The pid node's name: its parameters are ``pid: ros__parameters:`` in config/pid.yaml.
+PID_NODE = "pid"
+#: The gains, each per joint group (``kp.leg``) or per joint (``kp.lleg_joint_4``, overriding its group).
+GAINS = ("kp", "ki", "kd")
+#: The law's scalar settings (N*m, N*m, rad/s).
+LIMITS = ("max_torque", "integral_limit", "max_velocity")
 
 
 def load_pid_config(path: str | Path | None = None) -> dict:
-    """The PID configuration (``config/pid.yaml`` by default) as a dict."""
-    if path is None:
-        from cpg_walker.paths import config_path
+    """The pid node's ROS parameters from ``config/pid.yaml`` (or ``path``), flattened as ROS does
+    (``kp.leg``, ``max_torque``, ...): the same values pid_node gets through ``--params-file``."""
+    from cpg_walker.paths import ros_parameters
 
-        path = config_path("pid.yaml")
-    with open(path, encoding="utf-8") as fh:
-        cfg = yaml.safe_load(fh)
-    if not isinstance(cfg, dict) or "groups" not in cfg:
-        raise ValueError(f"{path}: expected a mapping with 'groups' (leg/arm/body/head gains)")
-    return cfg
+    return ros_parameters("pid.yaml" if path is None else Path(path), PID_NODE)
+
+
+def gain_owner(name: str) -> str:
+    """The group or joint a gain parameter (``kp.leg``, ``kd.rarm_joint_2``) sets; ValueError if neither."""
+    gain, _, owner = name.partition(".")
+    if gain not in GAINS or not (owner in GROUPS or owner in JOINT_NAMES):
+        raise ValueError(f"pid parameter {name!r}: expected <{'|'.join(GAINS)}>.<group or joint name> with "
+                         f"group one of {', '.join(GROUPS)}")
+    return owner
 
 
 class PidLaw:
@@ -43,7 +53,7 @@ class PidLaw:
         ki: Sequence[float] | np.ndarray,
         kd: Sequence[float] | np.ndarray,
         max_torque: float | Sequence[float] = MAX_TORQUE_NM,
-        integral_limit: float = 0.5,
+        integral_limit: float = math.inf,
         max_velocity: float | None = MAX_VELOCITY_RADS,
     ):
         self.names = tuple(names)
@@ -54,8 +64,8 @@ class PidLaw:
         for arr, label in checks:
             if not np.all(np.isfinite(arr)) or np.any(arr < 0):
                 raise ValueError(f"PID {label} must be finite and >= 0, got {arr}")
-        if not (math.isfinite(integral_limit) and integral_limit >= 0):
-            raise ValueError(f"PID integral_limit must be finite and >= 0, got {integral_limit}")
+        if not integral_limit >= 0:  # inf (the default: no clamp) is allowed, nan is not
+            raise ValueError(f"PID integral_limit must be >= 0, got {integral_limit}")
         self.integral_limit = float(integral_limit)
         self.max_velocity = None if max_velocity is None else float(max_velocity)
         self.integral = np.zeros(n)
@@ -68,24 +78,24 @@ class PidLaw:
         cls, names: Sequence[str] = JOINT_NAMES, config: Mapping | None = None, scale_kp: float = 1.0,
         scale_kd: float = 1.0,
     ) -> PidLaw:
-        """Gains by joint group, overridden per joint, from ``config/pid.yaml`` (or a given dict).
-        ``scale_kp``/``scale_kd`` multiply every gain (for margin sweeps)."""
-        cfg = dict(load_pid_config() if config is None else config)
-        groups, per_joint = cfg["groups"], cfg.get("joints") or {}
-        unknown = sorted(set(per_joint) - set(JOINT_NAMES))
-        if unknown:
-            raise ValueError(f"pid config: unknown joint(s) {unknown}")
-        gains = []
-        for name in names:
-            g = dict(groups[group_of(name)])
-            g.update(per_joint.get(name, {}))
-            gains.append((float(g["kp"]), float(g.get("ki", 0.0)), float(g["kd"])))
-        kp, ki, kd = (np.array(col) for col in zip(*gains, strict=True))
+        """The law from the pid parameters (``load_pid_config()`` by default, or a mapping with the same
+        flat keys, e.g. pid_node's current parameters): ``kp.<group>`` etc. for every group, overridden
+        by ``kp.<joint>``, and max_torque, integral_limit, max_velocity. Other keys (pid_node's watchdog
+        settings) are ignored. ``scale_kp``/``scale_kd`` multiply every gain (for margin sweeps)."""
+        cfg = load_pid_config() if config is None else config
+        missing = [f"{g}.{group}" for g in GAINS for group in GROUPS if f"{g}.{group}" not in cfg]
+        missing += [k for k in LIMITS if k not in cfg]
+        if missing:
+            raise ValueError(f"pid config: missing {', '.join(missing)}")
+        for key in cfg:
+            if key.split(".", 1)[0] in GAINS:
+                gain_owner(key)  # a typo (kp.legg) is an error, not a silently ignored gain
+        gains = {g: np.array([float(cfg.get(f"{g}.{name}", cfg[f"{g}.{group_of(name)}"])) for name in names])
+                 for g in GAINS}
         return cls(
-            names, kp * scale_kp, ki, kd * scale_kd,
-            max_torque=float(cfg.get("max_torque", MAX_TORQUE_NM)),
-            integral_limit=float(cfg.get("integral_limit", 0.5)),
-            max_velocity=cfg.get("max_velocity", MAX_VELOCITY_RADS),
+            names, gains["kp"] * scale_kp, gains["ki"], gains["kd"] * scale_kd,
+            max_torque=float(cfg["max_torque"]), integral_limit=float(cfg["integral_limit"]),
+            max_velocity=float(cfg["max_velocity"]),
         )
 
     def reset(self) -> None:
@@ -103,9 +113,10 @@ class PidLaw:
         return arr
 
     def step(self, target_pos, target_vel, measured_pos, measured_vel, dt: float) -> np.ndarray:
-        """Torques (N*m) for one control period ``dt`` (s); updates the integral."""
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"PID dt must be a positive number, got {dt!r}")
+        """Torques (N*m) for one control period ``dt`` (s); updates the integral. ``dt`` = 0 is the first
+        sample of a run (no interval yet: the integral does not change)."""
+        if not (math.isfinite(dt) and dt >= 0):
+            raise ValueError(f"PID dt must be a finite number >= 0, got {dt!r}")
         qt = self._check("target_pos", target_pos)
         vt = self._check("target_vel", target_vel)
         q = self._check("measured_pos", measured_pos)

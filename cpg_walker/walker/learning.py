@@ -1,7 +1,8 @@
 """Where the HOAP-2 controller comes from: its learning settings and the learned CPG file.
 
-One home for both lookups every consumer shares (cpg_node, ``cpg-walker cpg-walk``/``walk``/``learn``,
-the benchmarks): ``learning_settings`` reads config/cpg_humanoid_learning.yaml, ``resolve_cpg_file``
+One home for the lookups every consumer shares (cpg_node, ``cpg-walker cpg-walk``/``walk``/``learn``,
+the benchmarks): ``learning_settings`` reads config/cpg_humanoid_learning.yaml, ``cpg_defaults`` the
+walk's defaults (cpg_node's parameters file config/cpg.yaml: cpg_file, zeta, alpha), ``resolve_cpg_file``
 turns a ``cpg_file`` value into a path, ``load_controller`` loads it or learns at start-up.
 """
 
@@ -12,12 +13,21 @@ from pathlib import Path
 import yaml
 
 from cpg_walker.cpg.network import CPGParams
-from cpg_walker.paths import config_path
+from cpg_walker.paths import config_path, ros_parameters
 from cpg_walker.walker.controller import HumanoidCPG, HumanoidSettings
 
 LEARNING_CONFIG = "cpg_humanoid_learning.yaml"
-#: The packaged learned CPG (cpg_node's default ``cpg_file``); ``cpg-walker learn --install`` rewrites it.
+#: The packaged learned CPG's name in config/ (``cpg-walker learn`` writes it; with --install into the
+#: package). Which CPG a walk loads by default is cpg_node's ``cpg_file`` parameter (``cpg_defaults``).
 DEFAULT_CPG_FILE = "cpg_humanoid.yaml"
+#: The cpg node's name: its parameters (config/cpg.yaml) are the defaults of every walk.
+CPG_NODE = "cpg"
+
+
+def cpg_defaults() -> dict:
+    """cpg_node's parameters from config/cpg.yaml (``cpg_file``, ``zeta``, ``alpha``, ...), flattened as
+    ROS does: the defaults of the graph walk and of the in-process walk alike."""
+    return ros_parameters("cpg.yaml", CPG_NODE)
 
 
 def load_learning_config(path: str | Path | None = None) -> dict:
@@ -55,7 +65,7 @@ def resolve_cpg_file(cpg_file: str | Path) -> Path:
     return path
 
 
-def load_controller(cpg_file: str | Path | None = DEFAULT_CPG_FILE,
+def load_controller(cpg_file: str | Path | None,
                     n_oscillators: int | None = None) -> tuple[HumanoidCPG, str, bool]:
     """(controller, where it came from, learning converged). ``cpg_file`` None or '' learns now from the
     recorded walk with ``n_oscillators`` (default: the learning YAML's N); a file whose N differs from a

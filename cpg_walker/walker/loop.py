@@ -1,11 +1,13 @@
 """In-process replay: a target source drives the PID servos of the simulated HOAP-2 (no ROS).
 
 The PID runs as an explicit torque law at ``rate_hz`` on joint state that is ``delay_s`` old, and its
-torque is held between ticks - the way it will run as a ROS node. The target source is pluggable: any
-object with ``names`` and ``targets(t) -> (q, qd)`` (the recorded gait, later a CPG). A source that
-also has ``observe(t, tilt, loads)`` gets, at every control tick before ``targets(t)``, the chest IMU
-tilt (roll, pitch) in rad computed from the IMU orientation quaternion and the (left, right) sole loads
-in N — the readings a ROS node gets from /imu and /foot_load (sensory feedback, cpg/feedback.py).
+torque is held between ticks - the way it runs as a ROS node. By default the rate is the sim node's (one
+``control_period``, config/sim.yaml) and the delay one such period (the graph's round trip in real time).
+The target source is pluggable: any object with ``names`` and ``targets(t) -> (q, qd)`` (the recorded
+gait, a CPG). A source that also has ``observe(t, tilt, loads)`` gets, at every control tick before
+``targets(t)``, the chest IMU tilt (roll, pitch) in rad computed from the IMU orientation quaternion and
+the (left, right) sole loads in N — the readings a ROS node gets from /imu and /foot_load (sensory
+feedback, cpg/feedback.py).
 """
 
 from __future__ import annotations
@@ -17,10 +19,19 @@ from typing import Protocol
 
 import numpy as np
 
+from cpg_walker.paths import ros_parameters
 from cpg_walker.robot.contact import TouchdownDetector
 from cpg_walker.robot.hoap2 import Hoap2Sim
 from cpg_walker.robot.joints import JOINT_NAMES
 from cpg_walker.robot.pid import PidLaw
+
+#: The sim node's name: its parameters file (config/sim.yaml) holds the control period this loop shares.
+SIM_NODE = "sim"
+
+
+def control_period() -> float:
+    """s between PID ticks: sim_node's ``control_period`` (config/sim.yaml), the in-process loop's too."""
+    return float(ros_parameters("sim.yaml", SIM_NODE)["control_period"])
 
 
 class TargetSource(Protocol):
@@ -50,8 +61,8 @@ def run_replay(
     source: TargetSource,
     pid: PidLaw,
     duration: float,
-    rate_hz: float = 500.0,
-    delay_s: float = 0.002,
+    rate_hz: float | None = None,
+    delay_s: float | None = None,
     log_dt: float = 0.01,
     stop_on_fall: bool = True,
     progress=None,
@@ -59,7 +70,12 @@ def run_replay(
 ) -> ReplayResult:
     """Run ``duration`` s from the current sim state (call ``sim.reset()`` first); see module docstring.
 
-    ``on_log(sim)`` is called every ``log_dt`` (e.g. to render frames)."""
+    ``on_log(sim)`` is called every ``log_dt`` (e.g. to render frames). ``rate_hz`` None: 1 /
+    ``control_period()``; ``delay_s`` None: one control period."""
+    if rate_hz is None or delay_s is None:
+        period = control_period()
+        rate_hz = 1.0 / period if rate_hz is None else rate_hz
+        delay_s = period if delay_s is None else delay_s
     if not (duration > 0 and rate_hz > 0 and delay_s >= 0):
         raise ValueError("replay: duration and rate must be positive, delay non-negative")
     if tuple(source.names) != tuple(pid.names):
