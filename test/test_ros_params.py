@@ -122,15 +122,39 @@ def test_per_joint_gain_from_the_start_up_parameters(graph, probe):
 
 
 @pytest.mark.parametrize("exe", NODES)
-def test_a_node_without_its_file_names_the_file(exe):
-    """No value in code: started bare, a node stops with one line naming its parameters file."""
+def test_a_bare_node_reads_its_packaged_file(exe, graph, probe):
+    """``ros2 run cpg_walker <node>`` with no --params-file: the node takes every value from its packaged
+    parameters file (the one home of the values; there is no code default) and says so in its log."""
+    name = NODE_NAMES[exe]
+    log = graph.log_dir / f"{exe}.bare.log"
+    with open(log, "wb") as out:
+        proc = subprocess.Popen([sys.executable, "-m", f"cpg_walker.nodes.{exe}"], env=graph.env, stdout=out,
+                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
+    try:
+        expected = ros_parameters(f"{name}.yaml", name)
+        got = _read_back(probe, name, list(expected))
+        for key, value in expected.items():
+            same = got[key] == value if isinstance(value, str | bool) else got[key] == pytest.approx(value)
+            assert same, (name, key, got[key], value)
+        assert proc.poll() is None
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    text = log.read_text()
+    assert str(params_file(name)) in text and "Traceback" not in text
+
+
+def test_a_misspelt_gain_in_a_params_file_is_one_clear_line(tmp_path):
+    """A params file naming a gain group that does not exist: exit status 2, one line naming it."""
     from cpg_walker.nodes.graph import isolated_env, random_domain_id
 
-    done = subprocess.run([sys.executable, "-m", f"cpg_walker.nodes.{exe}"], capture_output=True, text=True,
-                          env=isolated_env(random_domain_id()), timeout=120)
+    bad = tmp_path / "pid.yaml"
+    bad.write_text("pid:\n  ros__parameters:\n    kp: {legg: 100.0}\n")
+    done = subprocess.run([sys.executable, "-m", "cpg_walker.nodes.pid_node", "--ros-args", "--params-file",
+                           str(bad)], capture_output=True, text=True, env=isolated_env(random_domain_id()),
+                          timeout=120)
     assert done.returncode == 2, done.stderr
-    assert "--params-file" in done.stderr and f"{NODE_NAMES[exe]}.yaml" in done.stderr
-    assert "Traceback" not in done.stderr
+    assert "kp.legg" in done.stderr and "Traceback" not in done.stderr
 
 
 def test_misspelt_gain_is_a_clear_error(graph):

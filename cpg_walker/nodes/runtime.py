@@ -27,11 +27,12 @@ def parse_cli(prog: str, description: str, interface: str, argv: list[str] | Non
 
     argv = list(sys.argv if argv is None else argv)
     name = NODE_NAMES.get(prog, prog)
-    files = f"parameter values: config/{name}.yaml (pass it with --params-file; -p name:=value overrides one)"
+    files = (f"parameter values: config/{name}.yaml, the packaged one unless --params-file gives another; "
+             "-p name:=value overrides one")
     parser = argparse.ArgumentParser(
         prog=prog, description=description, epilog=f"{interface}\n{files}",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        usage=f"{prog} [--help] --ros-args --params-file config/{name}.yaml [-p name:=value ...]",
+        usage=f"{prog} [--help] [--ros-args [--params-file FILE] [-p name:=value ...]]",
     )
     parser.parse_args(remove_ros_args(argv)[1:])
     return argv
@@ -292,18 +293,41 @@ def floats_param(description: str, read_only: bool = False) -> ParameterDescript
 
 
 def declare(node: Node, name: str, descriptor: ParameterDescriptor) -> object:
-    """Declare ``name`` with the descriptor's type and no value in code, and return its value: it comes
-    from the node's parameters file (config/<node name>.yaml, ``--params-file``; the value's one home) or
-    a ``-p`` override. No value: a ValueError naming the parameter and the file to pass."""
+    """Declare ``name`` with the descriptor's type and return its value. The value has one home, the
+    node's parameters file config/<node name>.yaml: passed with ``--params-file`` (or a ``-p`` override),
+    or, when the node was started without a value for it (a bare ``ros2 run``), read from the packaged
+    copy of that file. No value in either: a ValueError naming the parameter and the file."""
     from rclpy.exceptions import ParameterUninitializedException
     from rclpy.parameter import Parameter
 
-    node.declare_parameter(name, Parameter.Type(descriptor.type), descriptor)
+    packaged = packaged_parameters(node)
+    if name in packaged and name not in node._parameter_overrides:
+        node.declare_parameter(name, packaged[name], descriptor)
+        if not getattr(node, "_packaged_params_logged", False):
+            node._packaged_params_logged = True
+            node.get_logger().info(f"parameters not given on the command line are read from "
+                                   f"{params_file(node.get_name())}")
+    else:
+        node.declare_parameter(name, Parameter.Type(descriptor.type), descriptor)
     try:
         return node.get_parameter(name).value
     except ParameterUninitializedException:
         raise ValueError(f"parameter {name!r} of /{node.get_name()} has no value: start the node with "
                          f"--ros-args --params-file {params_file(node.get_name())}") from None
+
+
+def packaged_parameters(node: Node) -> dict:
+    """The ros__parameters of the node's packaged parameters file (empty if there is none), cached."""
+    cached = getattr(node, "_packaged_params", None)
+    if cached is None:
+        from cpg_walker.paths import ros_parameters
+
+        try:
+            cached = ros_parameters(params_file(node.get_name()), node.get_name())
+        except FileNotFoundError:
+            cached = {}
+        node._packaged_params = cached
+    return cached
 
 
 def params_file(node_name: str) -> Path:
