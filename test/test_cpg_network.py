@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cpg_walker.cpg import kernels
 from cpg_walker.cpg.hopf import adaptive_hopf_rhs, phase
 from cpg_walker.cpg.network import CPGNetwork, CPGParams
 
@@ -143,3 +144,25 @@ def test_frozen_playback_modulation_continuity_and_backwards():
 def test_bad_input_raises_value_error(make, message):
     with pytest.raises(ValueError, match=message):
         make()
+
+
+BACKENDS = ["numpy"] + (["numba"] if kernels.AVAILABLE else [])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_oscillator_at_r_zero_stays_finite(backend):
+    """hopf.R_FLOOR in every division by r: an oscillator perturbed exactly to the origin (r = 0) gives
+    ω̇ = −εF·y/r = 0 (not 0/0 = NaN) while learning, with and without feedback, and while frozen."""
+    net = CPGNetwork(np.array([10.0, 20.0]), x0=[1.0, 0.0], y0=[0.0, 0.0], alpha0=[0.5, 0.5], backend=backend)
+    out = np.empty_like(net.state)
+    net.learning_rhs(net.state, np.array([1.0]), out)
+    assert out[2, 0, 1] == 0.0
+    net.step(1e-3, 1.0)
+    net.step(1e-3, 1.0, feedback=0.3)
+    assert np.all(np.isfinite(net.state))
+    net.perturb(dx=[[0.0, -net.x[0, 1]]], dy=[[0.0, -net.y[0, 1]]])
+    assert net.x[0, 1] == 0.0 and net.y[0, 1] == 0.0
+    net.freeze()
+    net.step(1e-3, feedback=0.3)
+    assert np.all(np.isfinite(net.state))
+

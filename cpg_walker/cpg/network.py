@@ -339,14 +339,16 @@ class CPGNetwork:
         out[0] += eF
         out[0] += self._k * np.sin(target)  # (4) [(12)]: ẋ_i = γ(μ−r_i²)x_i − ω_i y_i + εF + τ·sin(R_i − φ_i)
         out[1] += om * x  # (5): ẏ_i = γ(μ − r_i²)y_i + ω_i x_i
-        np.divide(y, np.sqrt(r2), out=out[2])
+        r = np.sqrt(r2)
+        np.maximum(r, R_FLOOR, out=r)  # hopf.R_FLOOR: r = 0 gives 0, not NaN
+        np.divide(y, r, out=out[2])
         out[2] *= -eF  # (6): ω̇_i = −εF·y_i/r_i
         np.multiply(x, (p.eta * F)[:, None], out=out[3])  # (7): α̇_i = η x_i F
         np.subtract(target, theta, out=out[4])
         np.sin(out[4], out=out[4])
         out[4] *= self._learn_phi  # (8): φ̇_i = sin(R_i − θ_i − φ_i)  [(13): R = θ_ref]
         if self._g is not None:  # (16), (17): + g_k·(x_i, y_i)/r_i
-            out[:2] += xy * (self._g[:, None] / np.maximum(np.sqrt(r2), R_FLOOR))
+            out[:2] += xy * (self._g[:, None] / r)
         if self._scaled_h:
             out *= self._ts3
 
