@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Floor on r in divisions by r (y/r, x/r): r = 0 only if a user perturbs an oscillator exactly to the
-#: origin; the Hopf flow then stays there and the phase terms vanish instead of producing NaN.
+#: Floor on r in every division by r (y/r, x/r; here, network.py and kernels.py): r = 0 only if a user
+#: perturbs an oscillator exactly to the origin; the terms then vanish instead of producing NaN.
 R_FLOOR = 1e-12
 
 

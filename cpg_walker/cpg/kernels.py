@@ -78,12 +78,13 @@ def _learning_rhs(s, Pn, ref, ref_omega, k, learn_phi, ts, scaled, g, has_g, con
         dx += k[i] * math.sin(target)  # (4) [(12)]
         dy = y * radial
         dy += om * x  # (5)
-        dom = y / math.sqrt(r2)
+        r = max(math.sqrt(r2), R_FLOOR)  # hopf.R_FLOOR: r = 0 gives 0, not NaN
+        dom = y / r
         dom *= -eF  # (6)
         dal = x * (eta * F[b])  # (7)
         dph = math.sin(target - theta[i]) * learn_phi[i]  # (8) [(13)]
         if has_g:  # (16), (17)
-            c = g[b] / max(math.sqrt(r2), R_FLOOR)
+            c = g[b] / r
             dx += x * c
             dy += y * c
         if scaled:

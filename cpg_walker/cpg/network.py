@@ -20,7 +20,8 @@ How we read the paper's equations (its typos, and the choices it leaves open) �
 * (8)  φ̇_i = sin(R_i − θ_i − φ_i): φ_i converges to R_i − θ_i (mod 2π), which is a constant only if
        ω_i/ω_0 is an integer — oscillator 0 must hold the fundamental (true in Fig 2, where ω_0(0) is the
        lowest initial frequency). With θ = ψ + π/2 (hopf.py), the learned offset for oscillator
-       phases ψ_i = ω_i t + c_i is φ_i = k_i c_0 − c_i + (k_i − 1)π/2, k_i = ω_i/ω_0.
+       phases ψ_i = ω_i t + c_i is φ_i = k_i c_0 − c_i + (k_i − 1)π/2, k_i = ω_i/ω_0. For a
+       non-integer ratio see "Non-harmonic oscillators" below.
 * (9)  θ_i = sgn(x_i)·arccos(−y_i/r_i) = atan2(x_i, −y_i) (see hopf.phase).
 * (10) F = P_teach − Q_learned; with a per-CPG offset/gain normalisation (teaching.py) F is computed in
        normalised units: F = (P_teach − offset)/gain − Σ α_i x_i. offset = 0, gain = 1 is the paper.
@@ -40,6 +41,29 @@ oscillator 0 of CPG b with strength τ; `couple_cpgs` adds the eq 12–13 links 
 (a chain, or two main oscillators referencing each other for the legs' antisymmetric coupling); a link
 made with `learn_phase=False` is fixed: eq 12's coupling term acts, eq 13 does not (φ stays as given).
 φ of an oscillator without reference is unused, so φ_{b,0} is the eq 13 state "φ_{0,k}" of CPG b.
+
+Non-harmonic oscillators (eq 8 with a non-integer ρ = ω_i/ω_0). R_i = ρ·θ_0 is built on θ_0 of eq 9,
+a wrapped angle in (−π, π]. At each wrap of θ_0 (once per cycle of oscillator 0) R_i jumps by 2πρ,
+which is 0 mod 2π only for an integer ρ. For a non-integer ρ the target Θ_i = R_i − φ_i jumps by
+2π(ρ − round ρ) every cycle: no constant φ_i satisfies eq 8, and the frozen network's coupling term
+τ·sin(R_i − φ_i) kicks oscillator i to a new phase every cycle, so the waveform is lost although eq 6
+learns ω_i (`cpg-walker fit` on 7/11/19 rad/s: frequencies within 0.5 %, free-run error 58 % of the
+teaching RMS). The printed equations cannot fix this: a continuous R_i needs the unwrapped phase of
+oscillator 0, i.e. a count of its turns, and no variable of eqs 4–9 holds one. We add that count where
+it is needed: for an oscillator flagged `nonharmonic`, φ_i absorbs the jump at each wrap of its
+reference's θ (φ_i −= ±2π(ρ − round ρ): + for a forward wrap π → −π, − for a backward one, as with
+ω_0 < 0 or ζ < 0), so R_i − φ_i = ρ·(unwrapped θ_0) − const is continuous and φ_i is the (learned,
+then frozen) offset to the unwrapped reference. This runs after each integrator step
+(`_absorb_reference_wraps`, the same for both backends), while learning and while frozen; the RK4
+stages of the wrapping step that saw the jumped target are corrected to first order, so a wrap costs
+O(dt²), not O(dt) (0.4/1.0/1.7 Hz fit: free-run error 4.5 % without this stage correction, 0.5 % with
+it). Why only flagged oscillators: for harmonic content the wrapped reference helps. R_i is then
+periodic in θ_0, so τ·sin(R_i − φ_i) forces oscillator i at harmonics of ω_0 and entrains ω_i onto an
+exact integer multiple; with the correction the forcing follows ω_i itself and that pull is gone
+(Fig 2 with oscillators 1–3 flagged: 15.0, 30.0, 45.0, 63.8 rad/s instead of 60.0; the humanoid,
+seeded on exact harmonics, learned and walked 30 s flagged too, but unflagged it stays as it was).
+Default: none flagged, i.e. the printed eq 8, and `step` pays one `is None` test. teaching.py flags
+the oscillators seeded at a component that is clearly not an integer multiple of oscillator 0's.
 
 Learning vs playback: while `learning` is True all five variables evolve (eqs 4–11). `freeze()` sets
 F = 0 and stops ω, α, φ (the paper's "set F(t) = 0"; φ is frozen too so a perturbation cannot be
@@ -113,6 +137,14 @@ class CPGParams:
             raise ValueError(f"CPG parameter mu must be > 0 (it sets the amplitude), got {self.mu}")
 
 
+def fastest_rate(params: CPGParams, omega: np.ndarray, time_scale: np.ndarray) -> float:
+    """The fastest rate (1/s) RK4 must resolve: max over oscillators of time_scale·max(|ω|, 2γμ) — the
+    rotation (ω: (B, N) internal, ζ included) and the radial relaxation. `CPGNetwork.check_step` requires
+    dt·fastest_rate <= MAX_RATE_STEP."""
+    radial = 2 * params.gamma * params.mu
+    return float(np.max(np.asarray(time_scale)[:, None] * np.maximum(np.abs(omega), radial)))
+
+
 def _per_cpg(value: float | np.ndarray, B: int, name: str) -> np.ndarray:
     arr = np.asarray(value, dtype=float)
     if arr.ndim == 0:
@@ -147,6 +179,8 @@ class CPGNetwork:
     time_scale, offset, gain: per CPG, shape (B,) or scalar (see the module docstring).
     backend: "auto" | "numpy" | "numba" (None: $CPG_WALKER_BACKEND, default "auto"); see the module
         docstring. "numba" without numba installed raises ImportError; "auto" falls back to numpy.
+    nonharmonic: (B, N) booleans (broadcast): oscillators whose eq 8 reference phase gets the wrap
+        correction (module docstring, "Non-harmonic oscillators"); default none: the printed eq 8.
     """
 
     def __init__(
@@ -162,6 +196,7 @@ class CPGNetwork:
         offset: float | np.ndarray = 0.0,
         gain: float | np.ndarray = 1.0,
         backend: str | None = None,
+        nonharmonic: bool | np.ndarray = False,
     ):
         om = np.asarray(omega0, dtype=float)
         if om.ndim == 1:
@@ -216,6 +251,8 @@ class CPGNetwork:
         self._consts = np.array([self.params.epsilon, self.params.gamma, self._gmu_l, self.params.eta])
         self._g_none = np.zeros(B)
         self.backend = os.environ.get("CPG_WALKER_BACKEND", "auto") if backend is None else backend
+        self._wrap_idx: np.ndarray | None = None  # flat indices of the non-harmonic oscillators (None: none)
+        self.set_nonharmonic(nonharmonic)
 
     # ---------------------------------------------------------------- backend
     @property
@@ -317,6 +354,72 @@ class CPGNetwork:
         if not self.learning:
             self._prepare_playback()
 
+    # ---------------------------------------------------------------- non-harmonic oscillators (eq 8)
+    def set_nonharmonic(self, mask: bool | np.ndarray) -> None:
+        """Flag the oscillators (mask broadcast to (B, N)) whose eq 8 reference R_i = ρ·θ_ref gets the
+        wrap correction (module docstring); unflagged oscillators follow the printed eq 8. Oscillator 0
+        of a CPG is a phase reference, not referenced through eq 8: it cannot be flagged."""
+        m = np.broadcast_to(np.asarray(mask), (self.B, self.N))
+        if m.dtype != bool:
+            raise ValueError(f"nonharmonic must be booleans, got dtype {m.dtype}")
+        if m[:, 0].any():
+            raise ValueError("oscillator 0 of a CPG is the eq 8 phase reference and cannot be non-harmonic")
+        self._nonharmonic = m.copy()
+        idx = np.flatnonzero(m)
+        self._wrap_idx = idx if idx.size else None
+
+    @property
+    def nonharmonic(self) -> np.ndarray:
+        """(B, N) booleans: oscillators with the eq 8 wrap correction (a copy; see `set_nonharmonic`)."""
+        return self._nonharmonic.copy()
+
+    def _reference_phases(self) -> np.ndarray:
+        """θ (eq 9) of the reference oscillators of the non-harmonic oscillators (flat)."""
+        i = self._ref.ravel()[self._wrap_idx]
+        return np.arctan2(self._s[0].ravel()[i], -self._s[1].ravel()[i])
+
+    def _absorb_reference_wraps(self, before: np.ndarray, dt: float) -> None:
+        """After a step: where θ_ref wrapped (by ±2π between `before` and now), φ_i absorbs the jump of
+        R_i = ρ·θ_ref modulo 2π, δ = ±2π(ρ − round ρ), so R_i − φ_i stays continuous. A step moves θ by
+        at most MAX_RATE_STEP < π (check_step), so a change beyond ±π is a wrap: −π forward (θ from π to
+        −π), +π backward (ω_ref < 0 or ζ < 0). Applied while learning and while frozen (φ is then the
+        frozen offset to the unwrapped reference; `_phi_play` follows).
+
+        The RK4 stages after the crossing saw the jumped target; their share of the step's increments of
+        x_i (eq 4's coupling term) and, while learning, of φ_i (eq 8) is replaced by the continuous
+        target's (first order, with the target at the end of the step and the crossing located by linear
+        interpolation of θ_ref), so the error per wrap is O(dt²), as without wraps, not O(dt)."""
+        d = self._reference_phases() - before
+        turns = (d < -np.pi).astype(float) - (d > np.pi)
+        hit = np.flatnonzero(turns)
+        if hit.size == 0:
+            return
+        idx, turns = self._wrap_idx[hit], turns[hit]
+        om = self._s[2].ravel()
+        rho = om[idx] / om[self._ref_omega.ravel()[idx]]
+        delta = 2 * np.pi * turns * (rho - np.round(rho))
+        phi = self._s[4].reshape(-1)  # a view
+        new = phi[idx] - delta
+        new -= 2 * np.pi * np.round(new / (2 * np.pi))  # keep φ in [−π, π]
+        # RK4 weight of the stages (at 0, h/2, h/2, h) that came after the crossing at fraction f of the step
+        f = (np.pi * turns - before[hit]) / (d[hit] + 2 * np.pi * turns)
+        late = np.where(f < 0.5, 5 / 6, 1 / 6) * dt
+        i_ref = self._ref.ravel()[idx]
+        x, y = self._s[0].reshape(-1), self._s[1].reshape(-1)
+        target = rho * np.arctan2(x[i_ref], -y[i_ref]) - new  # continuous Θ_i at the end of the step
+        if self.learning:
+            ts = self.time_scale[idx // self.N]
+            k = self._k.ravel()[idx] * ts
+            theta = np.arctan2(x[idx], -y[idx])
+            learn = self._learn_phi.ravel()[idx] * ts
+            new += late * learn * (np.sin(target - theta) - np.sin(target - delta - theta))  # (8)
+        else:
+            k = self._k_play.ravel()[idx]
+        x[idx] += late * k * (np.sin(target) - np.sin(target - delta))  # (4)
+        phi[idx] = new
+        if not self.learning:
+            self._phi_play.reshape(-1)[idx] = new
+
     # ---------------------------------------------------------------- right-hand sides
     def learning_rhs(self, s: np.ndarray, Pn: np.ndarray, out: np.ndarray) -> None:
         """d[x, y, ω, α, φ]/dt: eqs 4–11 (+16–17), written into `out` (5, B, N).
@@ -339,14 +442,16 @@ class CPGNetwork:
         out[0] += eF
         out[0] += self._k * np.sin(target)  # (4) [(12)]: ẋ_i = γ(μ−r_i²)x_i − ω_i y_i + εF + τ·sin(R_i − φ_i)
         out[1] += om * x  # (5): ẏ_i = γ(μ − r_i²)y_i + ω_i x_i
-        np.divide(y, np.sqrt(r2), out=out[2])
+        r = np.sqrt(r2)
+        np.maximum(r, R_FLOOR, out=r)  # hopf.R_FLOOR: r = 0 gives 0, not NaN
+        np.divide(y, r, out=out[2])
         out[2] *= -eF  # (6): ω̇_i = −εF·y_i/r_i
         np.multiply(x, (p.eta * F)[:, None], out=out[3])  # (7): α̇_i = η x_i F
         np.subtract(target, theta, out=out[4])
         np.sin(out[4], out=out[4])
         out[4] *= self._learn_phi  # (8): φ̇_i = sin(R_i − θ_i − φ_i)  [(13): R = θ_ref]
         if self._g is not None:  # (16), (17): + g_k·(x_i, y_i)/r_i
-            out[:2] += xy * (self._g[:, None] / np.maximum(np.sqrt(r2), R_FLOOR))
+            out[:2] += xy * (self._g[:, None] / r)
         if self._scaled_h:
             out *= self._ts3
 
@@ -439,9 +544,8 @@ class CPGNetwork:
         """Reject a non-positive, non-finite or too-large step (RK4 accuracy/stability guard)."""
         if not isinstance(dt, (int, float, np.floating)) or not np.isfinite(dt) or dt <= 0:
             raise ValueError(f"integration step must be a finite number > 0, got {dt!r}")
-        zeta = 1.0 if self.learning else np.abs(self._zeta)[:, None]
-        radial = 2 * self.params.gamma * self.params.mu
-        fastest = float(np.max(self.time_scale[:, None] * np.maximum(np.abs(self._s[2]) * zeta, radial)))
+        zeta = 1.0 if self.learning else self._zeta[:, None]
+        fastest = fastest_rate(self.params, self._s[2] * zeta, self.time_scale)
         if dt * fastest > MAX_RATE_STEP:
             raise ValueError(
                 f"integration step dt={dt:g} s is too large for the fastest rate of this network "
@@ -462,6 +566,7 @@ class CPGNetwork:
         eqs 16–17, scalar or (B,), held over the step (None = no feedback term)."""
         if dt != self._checked_dt:
             self.check_step(dt)
+        theta_ref = None if self._wrap_idx is None else self._reference_phases()  # non-harmonic (eq 8)
         if feedback is None:
             self._g = None
         else:
@@ -503,6 +608,8 @@ class CPGNetwork:
                 self._rk_xy.step(self.playback_rhs, self._s[:2], dt, None, None, None)
             if self._alpha_relaxing:
                 self._relax_alpha(dt)
+        if theta_ref is not None:
+            self._absorb_reference_wraps(theta_ref, dt)
         self.t += dt
 
     def normalise_teaching(self, P: float | np.ndarray) -> np.ndarray:

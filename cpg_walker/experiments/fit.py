@@ -57,8 +57,8 @@ def fit_signal(
     fc = cfg["fit"]
     settings = tch.settings_from_dict(cfg["teaching"])
     params = params_from(cfg)
-    plan = tch.plan_teaching(t, values, n_oscillators, settings)
-    net = tch.make_network(plan, params)
+    plan = tch.plan_teaching(t, values, n_oscillators, settings, params)
+    net = tch.make_network(plan)
     c_min = float(plan.time_scale.min())
     budget = float(duration_internal or fc["duration_internal"]) / c_min  # physical seconds
     period = 2 * np.pi / (plan.time_scale * settings.reference_omega)  # lowest component's period (B,)
@@ -191,7 +191,7 @@ def run_fit(csv_path: Path, column: str | None, n_oscillators: int | None, out_d
     order = np.argsort(freqs, axis=1)
 
     def per_col(a: np.ndarray) -> list:
-        rows = [[float(v) for v in a[b, order[b]]] for b in range(a.shape[0])]
+        rows = [a[b, order[b]].tolist() for b in range(a.shape[0])]  # Python floats (or bools)
         return rows[0] if len(rows) == 1 else rows
 
     def scalar(a: np.ndarray) -> float | list:
@@ -204,6 +204,7 @@ def run_fit(csv_path: Path, column: str | None, n_oscillators: int | None, out_d
         "learned_frequencies": per_col(freqs),
         "learned_amplitudes": per_col(amps),
         "learned_phases": per_col(res.net.phi),
+        "nonharmonic_oscillators": per_col(res.net.nonharmonic),
         "offset": scalar(res.net.offset),
         "free_run_rms_error": scalar(res.free_run_rms_error),
         "teaching_rms": scalar(res.teaching_rms),
@@ -216,7 +217,10 @@ def run_fit(csv_path: Path, column: str | None, n_oscillators: int | None, out_d
         "dt_s": float(res.plan.dt),
         "notes": {
             "learned_amplitudes": "physical amplitude of each oscillator's component: gain·α_i·r_i",
-            "learned_phases": "φ_i (eq 8), rad; phase offset of oscillator i to oscillator 0",
+            "learned_phases": "φ_i (eq 8), rad; phase offset of oscillator i to oscillator 0 (for a "
+                              "non-harmonic oscillator: to the current wrap of θ_0, see network.py)",
+            "nonharmonic_oscillators": "oscillators with eq 8's wrap correction (component not an integer "
+                                       "multiple of oscillator 0's; cpg/teaching.py nonharmonic_mask)",
             "repetition": "the record is played in a loop of loop_length_s when learning needs longer",
         },
     }
