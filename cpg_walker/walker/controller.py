@@ -57,7 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpg_walker.cpg.network import CPGNetwork, CPGParams
+from cpg_walker.cpg.network import MAX_RATE_STEP, CPGNetwork, CPGParams
 from cpg_walker.robot.joints import CONTROLLED_JOINTS, PAPER_LEG_DOFS, SIDES
 
 DOFS: tuple[str, ...] = CONTROLLED_JOINTS
@@ -276,7 +276,7 @@ class HumanoidCPG:
         cls.couple_legs(net)
         fastest = float(om0.max()) * c / min(1.0, s.harmonic_seed_factor)  # rad/s
         dt_max = 2 * math.pi / (s.steps_per_fastest_period * fastest)
-        dt_max = min(dt_max, 0.45 / (c * 2 * p.gamma * p.mu))
+        dt_max = min(dt_max, 0.9 * MAX_RATE_STEP / (c * 2 * p.gamma * p.mu))  # radial rate, 10 % margin
         per_stride = math.ceil(cyc.period / dt_max)
         dt = cyc.period / per_stride
         net.check_step(dt)
