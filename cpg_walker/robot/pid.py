@@ -11,7 +11,7 @@ no-load speed). Non-finite inputs are refused with a ValueError naming the joint
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -103,15 +103,23 @@ class PidLaw:
         return arr
 
     def step(self, target_pos, target_vel, measured_pos, measured_vel, dt: float) -> np.ndarray:
-        """Torques (N*m) for one control period ``dt`` (s); updates the integral."""
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"PID dt must be a positive number, got {dt!r}")
+        """Torques (N*m) for one control period ``dt`` (s); updates the integral. Every input is checked."""
+        self._check_dt(dt)
         qt = self._check("target_pos", target_pos)
         vt = self._check("target_vel", target_vel)
         q = self._check("measured_pos", measured_pos)
         v = self._check("measured_vel", measured_vel)
         err = qt - q
         pd = self.kp * err + self.kd * (vt - v)
+        return self._torque(err, pd, v, dt)
+
+    @staticmethod
+    def _check_dt(dt: float) -> None:
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"PID dt must be a positive number, got {dt!r}")
+
+    def _torque(self, err: np.ndarray, pd: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
+        """The law from the error q* - q and the PD term: conditional integration, clamps, velocity limit."""
         candidate = self.integral + err * dt
         i_term = self.ki * candidate
         saturated = np.abs(pd + i_term) > self.max_torque
@@ -126,3 +134,52 @@ class PidLaw:
             over = (np.abs(v) > self.max_velocity) & (np.sign(tau) == np.sign(v))
             tau = np.where(over, 0.0, tau)
         return tau
+
+    def stepper(self, dt: float) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+        """``step`` at a fixed period ``dt`` for a loop that calls it every period (walker/loop.py).
+
+        ``dt`` is checked here, once. A call ``f(target_pos, target_vel, measured_pos, measured_vel)``
+        takes float arrays of len(names) and returns the torques ``step`` returns (the same arithmetic,
+        equal to the last bit; the integral is shared with ``step``). It skips the per-input checks: any
+        non-finite input makes the PD term non-finite, which one reduction detects, and such a call (or
+        one whose inputs are not arrays of the right shape) goes through the checked ``step``, which
+        refuses it naming the joint. With every ki = 0 (the configured servos) the integral is clamped
+        to 0 at every step, so the lean path leaves it out."""
+        self._check_dt(dt)
+        kp, kd, mt = self.kp, self.kd, self.max_torque
+        neg_mt = -mt
+        n = len(self.names)
+        shape = (n,)
+        err, pd, dv = np.empty(n), np.empty(n), np.empty(n)
+        vmax = self.max_velocity
+        no_integral = not np.any(self.ki)
+        if no_integral:
+            self.integral[:] = 0.0  # what the first step's clamp to +-0 would do
+        ndarray, isfinite = np.ndarray, math.isfinite
+        add_reduce, max_reduce = np.add.reduce, np.maximum.reduce
+        add, subtract, multiply, maximum, minimum = np.add, np.subtract, np.multiply, np.maximum, np.minimum
+
+        def lean(qt: np.ndarray, vt: np.ndarray, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+            if not (type(qt) is ndarray and type(vt) is ndarray and type(q) is ndarray
+                    and type(v) is ndarray and qt.shape == shape and vt.shape == shape
+                    and q.shape == shape and v.shape == shape):
+                return self.step(qt, vt, q, v, dt)
+            subtract(qt, q, out=err)
+            multiply(kp, err, out=pd)
+            subtract(vt, v, out=dv)
+            multiply(dv, kd, out=dv)
+            add(pd, dv, out=pd)
+            if not isfinite(add_reduce(pd)):  # a non-finite input (or an overflow): the checked law
+                return self.step(qt, vt, q, v, dt)
+            if not no_integral:
+                return self._torque(err, pd, v, dt)  # allocates its result
+            add(pd, 0.0, out=pd)  # + ki*integral = +0.0 (turns a -0.0 PD term into +0.0, as step does)
+            tau = maximum(pd, neg_mt)
+            minimum(tau, mt, out=tau)
+            if vmax is not None:
+                np.abs(v, out=dv)
+                if max_reduce(dv) > vmax:
+                    tau[(dv > vmax) & (np.sign(tau) == np.sign(v))] = 0.0
+            return tau
+
+        return lean
