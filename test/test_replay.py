@@ -109,27 +109,31 @@ def _logged(result) -> np.ndarray:
     return np.column_stack([result.t, result.base_xy, result.base_z, result.heading, result.loads])
 
 
-@pytest.mark.parametrize("rate_hz, delay_s, joints", [
-    (500.0, 0.002, JOINT_NAMES), (500.0, 0.0, JOINT_NAMES), (1000.0, 0.003, JOINT_NAMES),
-    (333.3, 0.005, JOINT_NAMES), (250.0, 0.001, LEG_JOINTS)])
-def test_lean_loop_equals_the_plain_loop(rate_hz, delay_s, joints):
+@pytest.mark.parametrize("rate_hz, delay_s, joints, max_torque", [
+    (500.0, 0.002, JOINT_NAMES, None), (500.0, 0.0, JOINT_NAMES, None), (1000.0, 0.003, JOINT_NAMES, None),
+    (333.3, 0.005, JOINT_NAMES, None), (250.0, 0.001, LEG_JOINTS, None), (500.0, 0.002, JOINT_NAMES, 20.0)])
+def test_lean_loop_equals_the_plain_loop(rate_hz, delay_s, joints, max_torque):
     """run_replay (lean PID, states kept only where a tick reads them, physics stepped between events)
-    gives the plain loop's run to the last bit, for rates and delays that do and do not divide."""
+    gives the plain loop's run to the last bit, for rates and delays that do and do not divide, and
+    with a stiff law allowed more torque than the motors (20 vs 9 N*m: the sim's clamp acts)."""
     gait = load_gait("walk")
     cfg = load_pid_config()
+    stiff = {} if max_torque is None else {"scale_kp": 20.0}
+    if max_torque is not None:
+        cfg["max_torque"] = max_torque
     runs = []
     for lean in (True, False):
-        sim, pid = Hoap2Sim(), PidLaw.from_config(joints, config=cfg)
+        sim, pid = Hoap2Sim(), PidLaw.from_config(joints, config=cfg, **stiff)
         source = GaitPlayback(gait, names=joints, default=sim.joint_positions(joints))
         if lean:
             runs.append(_logged(run_replay(sim, source, pid, 0.4, rate_hz=rate_hz, delay_s=delay_s)))
         else:
             runs.append(_reference_loop(sim, source, pid, 0.4, rate_hz, delay_s))
-        runs[-1] = (runs[-1], sim.data.qpos.copy(), sim.data.qvel.copy())
-    (lean_rows, lean_qpos, lean_qvel), (ref_rows, ref_qpos, ref_qvel) = runs
-    assert lean_rows.shape == ref_rows.shape == (40, 7)
-    assert lean_rows.tobytes() == ref_rows.tobytes()
-    assert lean_qpos.tobytes() == ref_qpos.tobytes() and lean_qvel.tobytes() == ref_qvel.tobytes()
+        runs[-1] = (runs[-1], *(a.copy() for a in (sim.data.qpos, sim.data.qvel, sim.data.ctrl)))
+    lean_run, ref_run = runs
+    assert lean_run[0].shape == ref_run[0].shape == (40, 7)
+    for lean_part, ref_part in zip(lean_run, ref_run, strict=True):  # logs, final qpos, qvel, held torque
+        assert lean_part.tobytes() == ref_part.tobytes()
 
 
 def test_lean_loop_equals_the_plain_loop_through_the_cpg_handover():

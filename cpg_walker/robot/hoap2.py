@@ -198,14 +198,16 @@ class Hoap2Sim:
                 self._push_until = -1.0
             mujoco.mj_step(self.model, self.data)
 
-    def set_torque_unchecked(self, torque: np.ndarray) -> None:
+    def set_torque_unchecked(self, torque: np.ndarray, within_limits: bool = False) -> None:
         """Hold ``torque`` from now on, as ``step(torque, 0)`` would (clamped to the motor limits), without
         its checks: for a loop that hands over a finite float array of len(JOINT_NAMES) it has validated
-        itself (walker/loop.py: the PID stepper returns finite torques or raises)."""
-        mt = self.max_torque
-        tau = np.maximum(torque, -mt)
-        np.minimum(tau, mt, out=tau)  # = np.clip(torque, -max, max) for finite values
-        self.data.ctrl[self._act] = tau
+        itself (walker/loop.py: the PID stepper returns finite torques or raises). ``within_limits``: the
+        caller guarantees |torque| <= ``max_torque`` (the clamp would change nothing and is skipped)."""
+        if not within_limits:
+            mt = self.max_torque
+            torque = np.maximum(torque, -mt)
+            np.minimum(torque, mt, out=torque)  # = np.clip(torque, -max, max) for finite values
+        self.data.ctrl[self._act] = torque
 
     def apply_push(self, force: Sequence[float], duration: float = 0.1) -> None:
         """Push the torso at its CoM with a world-frame force (N) for ``duration`` s of sim time."""

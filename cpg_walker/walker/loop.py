@@ -79,6 +79,7 @@ def run_replay(
     tau_full = np.zeros(len(JOINT_NAMES))
     pid.reset()
     law = pid.stepper(per_tick * dt)  # checked once here; it refuses non-finite inputs by itself
+    within = bool(np.all(pid.max_torque <= sim.max_torque[sel]))  # the law's clamp implies the motors'
     observe = getattr(source, "observe", None)
     targets = source.targets
     data, step, set_torque = sim.data, sim.step, sim.set_torque_unchecked
@@ -120,10 +121,10 @@ def run_replay(
                 observe(data.time - t0, sim.imu().tilt(), sim.sole_loads())
             qt, vt = targets(data.time - t0)
             if all_joints:
-                set_torque(law(qt, vt, q, v))
+                set_torque(law(qt, vt, q, v), within)
             else:
                 tau_full[sel] = law(qt, vt, q, v)
-                set_torque(tau_full)
+                set_torque(tau_full, within)
         nxt = min(b + per_tick - b % per_tick,  # next tick
                   b + (record_phase - b - 1) % per_tick + 1,  # next kept state
                   b + log_every - b % log_every,  # next log sample
