@@ -80,18 +80,33 @@ def test_gains_come_from_the_config_by_group():
         PidLaw(["j"], kp=-1.0, ki=0.0, kd=0.0)
 
 
-@pytest.mark.parametrize("ki", [0.0, "mixed"])
-def test_stepper_gives_the_checked_step_to_the_last_bit(ki):
-    """The loop's lean law (checks once) against `step` on random inputs: saturation, the velocity limit,
-    exact and signed zeros, and (with ki > 0) the integral's conditional growth and clamp."""
+def _numba_installed() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+COMPILED = [False, pytest.param(True, marks=pytest.mark.skipif(not _numba_installed(),
+                                                               reason="numba is not installed"))]
+
+
+@pytest.mark.parametrize("compiled", COMPILED)
+@pytest.mark.parametrize("ki, max_torque", [(0.0, 9.0), ("mixed", 9.0), (0.0, "some zero")])
+def test_stepper_gives_the_checked_step_to_the_last_bit(ki, max_torque, compiled):
+    """The loop's lean law (checks once; numpy or compiled) against `step` on random inputs: saturation,
+    the velocity limit, exact and signed zeros, (with ki > 0) the integral's conditional growth and clamp,
+    and joints without torque (limit 0, where np.clip's result is +0.0)."""
     rng = np.random.default_rng(7)
     n = 25
     names = [f"j{i}" for i in range(n)]
-    kw = dict(kp=rng.uniform(0.0, 200.0, n), kd=rng.uniform(0.0, 5.0, n), max_torque=9.0,
-              integral_limit=0.5, max_velocity=5.0,
+    kw = dict(kp=rng.uniform(0.0, 200.0, n), kd=rng.uniform(0.0, 5.0, n), integral_limit=0.5,
+              max_torque=9.0 if max_torque == 9.0 else np.where(np.arange(n) % 4 == 0, 0.0, 9.0),
+              max_velocity=5.0,
               ki=0.0 if ki == 0.0 else np.where(rng.random(n) < 0.5, 0.0, rng.uniform(10.0, 300.0, n)))
     ref, lean = PidLaw(names, **kw), PidLaw(names, **kw)
-    law = lean.stepper(0.002)
+    law = lean.stepper(0.002, compiled=compiled)
     saturated = clamped = 0
     for k in range(400):
         qt, q = rng.normal(0.0, 0.1, (2, n))
@@ -113,11 +128,12 @@ def test_stepper_gives_the_checked_step_to_the_last_bit(ki):
     assert ref.step(qt, vt, q, v, 0.002).tobytes() == lean.step(qt, vt, q, v, 0.002).tobytes()
 
 
-def test_stepper_refuses_what_step_refuses():
+@pytest.mark.parametrize("compiled", COMPILED)
+def test_stepper_refuses_what_step_refuses(compiled):
     pid = PidLaw(["x", "y"], kp=10.0, ki=0.0, kd=1.0)
     with pytest.raises(ValueError, match="dt"):
         pid.stepper(0.0)
-    law = pid.stepper(0.002)
+    law = pid.stepper(0.002, compiled=compiled)
     zero = np.zeros(2)
     for bad in (np.nan, np.inf, -np.inf):
         for slot in range(4):
