@@ -74,6 +74,29 @@ def test_numba_step_equals_numpy_step(seed: int, B: int, N: int) -> None:
     np.testing.assert_allclose(fast.output(), Q, rtol=0, atol=TOL * (1 + np.max(np.abs(Q))))
 
 
+@pytest.mark.parametrize("seed,B,N", [(5, 1, 1), (6, 10, 3), (7, 4, 6)])
+def test_playback_derivative_equals_playback_rhs(seed: int, B: int, N: int) -> None:
+    """The frozen network's d[x, y]/dt (joint velocities of the controller) by the kernel and in numpy."""
+    ref, fast, rng = _pair(seed, B, N)
+    for net in (ref, fast):
+        net.freeze()
+    zeta = rng.uniform(-1.5, 1.5, B)
+    g = rng.uniform(-0.5, 0.5, B)
+    for fb in (None, g):
+        for net in (ref, fast):
+            net.set_frequency_scale(zeta)
+            net.step(1e-3, feedback=fb)  # the derivative includes the feedback held over the last step
+        fast.state[:] = ref.state
+        expected = np.empty((2, B, N))
+        ref.playback_rhs(ref.state[:2], None, expected)
+        got = np.empty((2, B, N))
+        fast.playback_derivative(got)
+        np.testing.assert_allclose(got, expected, rtol=0, atol=TOL * (1 + np.max(np.abs(expected))))
+        numpy_path = np.empty((2, B, N))
+        ref.playback_derivative(numpy_path)
+        assert numpy_path.tobytes() == expected.tobytes()
+
+
 def test_backend_selection(monkeypatch: pytest.MonkeyPatch) -> None:
     w0 = np.array([1.0, 2.0])
     monkeypatch.setenv("CPG_WALKER_BACKEND", "numpy")

@@ -7,7 +7,10 @@ import pytest
 
 from cpg_walker.robot.gait_data import (
     DATA_DIR,
+    Gait,
     GaitPlayback,
+    _parse_gait,
+    _search_steady_cycle,
     estimate_period,
     find_steady_cycle,
     load_gait,
@@ -102,3 +105,47 @@ def test_loader_header_errors(tmp_path):
         load_gait(tmp_path / "nowhere.csv")
     g = load_gait(_write(tmp_path, HEAD + "0.0,0.1,0.2\n0.002,0.3,0.4\n\n\n"))  # trailing blank lines ok
     assert g.names == ("lleg_joint_4", "rleg_joint_4") and g.dt == pytest.approx(0.002)
+
+
+def test_loads_are_cached_by_content(tmp_path):
+    g = load_gait("walk")
+    assert load_gait("walk") is g  # parsed once per process
+    fresh = _parse_gait((DATA_DIR / "walk.csv").read_bytes(), DATA_DIR / "walk.csv", "walk", 2)
+    assert fresh.names == g.names and fresh.source == g.source and fresh.name == g.name
+    assert fresh.t.tobytes() == g.t.tobytes() and fresh.q.tobytes() == g.q.tobytes()
+    with pytest.raises(ValueError, match="read-only"):
+        g.q[0, 0] = 1.0  # a shared Gait cannot be changed under another caller
+    p = _write(tmp_path, HEAD + "0.0,0.1,0.2\n0.002,0.3,0.4\n")
+    first = load_gait(p)
+    assert load_gait(p) is first
+    p.write_text(HEAD + "0.0,0.1,0.2\n0.002,0.3,0.5\n")  # same size, maybe the same mtime: new content
+    second = load_gait(p)
+    assert second.q[1, 1] == 0.5 and first.q[1, 1] == 0.4
+
+
+def test_steady_cycle_is_cached_by_content():
+    g = load_gait("walk")
+    c = find_steady_cycle(g)
+    assert find_steady_cycle(g) is c and c == _search_steady_cycle(g, 0.8, 0.15, 0.03)
+    # another recording with the same source name but other samples gets its own search
+    shorter = Gait(g.name, g.names, g.t[:-400].copy(), g.q[:-400].copy(), g.source)
+    c2 = find_steady_cycle(shorter)
+    assert c2.end <= shorter.duration < c.end and find_steady_cycle(shorter) is c2
+
+
+@pytest.mark.parametrize("gait", ["walk", "slow"])
+def test_playback_targets_interpolate_as_gait_at(gait):
+    """GaitPlayback.targets (one scalar time, the played columns only) equals Gait.at to the last bit."""
+    g = load_gait(gait)
+    pb = GaitPlayback(g)
+    vel = g.velocities()
+    c = pb.cycle
+    times = [-0.1, 0.0, 0.0005, 0.001, 1.2345, c.start, c.end - 1e-9, c.end, c.end + 0.0004, g.duration,
+             g.duration + 0.5, 40.0, *np.random.default_rng(3).uniform(0.0, 30.0, 200)]
+    cols = [g.names.index(n) for n in pb.names if n in g.names]
+    dst = [i for i, n in enumerate(pb.names) if n in g.names]
+    for t in times:
+        tr = pb.recording_time(t)
+        q, qd = pb.targets(t)
+        assert q[dst].tobytes() == g.at(tr)[cols].tobytes(), t
+        assert qd[dst].tobytes() == vel[min(round(tr / g.dt), len(vel) - 1), cols].tobytes(), t

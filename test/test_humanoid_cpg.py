@@ -215,3 +215,12 @@ def test_learn_writes_strict_json_and_leaves_the_packaged_cpg_alone(tmp_path, mo
     assert (tmp_path / "cpg_humanoid.yaml").is_file()
     assert on_disk["files"]["yaml"] == [str(tmp_path / "cpg_humanoid.yaml")]
     assert packaged.read_bytes() == before
+
+
+def test_load_controller_without_a_file_learns_now():
+    """cpg_node's cpg_file '' path: learn from the recorded walk with the learning YAML's settings."""
+    from cpg_walker.walker.learning import load_controller
+
+    ctrl, origin, converged = load_controller("", 3)
+    assert origin.startswith("learned at start-up (N=3") and converged
+    assert ctrl.net.N == 3 and not ctrl.net.learning

@@ -88,3 +88,71 @@ def test_first_sample_dt_zero_is_pd_only():
     pid = PidLaw(["j"], kp=50.0, ki=200.0, kd=2.0, integral_limit=3.0)
     tau = pid.step([0.1], [0.0], [0.0], [0.5], 0.0)
     assert tau[0] == pytest.approx(50.0 * 0.1 - 2.0 * 0.5) and pid.integral[0] == 0.0
+
+
+def _numba_installed() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+COMPILED = [False, pytest.param(True, marks=pytest.mark.skipif(not _numba_installed(),
+                                                               reason="numba is not installed"))]
+
+
+@pytest.mark.parametrize("compiled", COMPILED)
+@pytest.mark.parametrize("ki, max_torque", [(0.0, 9.0), ("mixed", 9.0), (0.0, "some zero")])
+def test_stepper_gives_the_checked_step_to_the_last_bit(ki, max_torque, compiled):
+    """The loop's lean law (checks once; numpy or compiled) against `step` on random inputs: saturation,
+    the velocity limit, exact and signed zeros, (with ki > 0) the integral's conditional growth and clamp,
+    and joints without torque (limit 0, where np.clip's result is +0.0)."""
+    rng = np.random.default_rng(7)
+    n = 25
+    names = [f"j{i}" for i in range(n)]
+    kw = dict(kp=rng.uniform(0.0, 200.0, n), kd=rng.uniform(0.0, 5.0, n), integral_limit=0.5,
+              max_torque=9.0 if max_torque == 9.0 else np.where(np.arange(n) % 4 == 0, 0.0, 9.0),
+              max_velocity=5.0,
+              ki=0.0 if ki == 0.0 else np.where(rng.random(n) < 0.5, 0.0, rng.uniform(10.0, 300.0, n)))
+    ref, lean = PidLaw(names, **kw), PidLaw(names, **kw)
+    law = lean.stepper(0.002, compiled=compiled)
+    saturated = clamped = 0
+    for k in range(400):
+        qt, q = rng.normal(0.0, 0.1, (2, n))
+        vt, v = rng.normal(0.0, 3.0, (2, n))  # |v| > 5 rad/s now and then: the velocity limit acts
+        if k % 5 == 0:  # exact zeros and a -0.0 PD term (-0.0 - 0.0 = -0.0)
+            qt[:5], q[:5], vt[:5], v[:5] = -0.0, 0.0, -0.0, 0.0
+            qt[5:8] = q[5:8]
+        expected = ref.step(qt, vt, q, v, 0.002)
+        got = law(qt, vt, q, v)
+        assert got.tobytes() == expected.tobytes(), k
+        assert lean.integral.tobytes() == ref.integral.tobytes(), k
+        saturated += int(np.sum(np.abs(expected) == 9.0))
+        clamped += int(np.sum((np.abs(v) > 5.0) & (expected == 0.0)))
+    assert saturated > 100 and clamped > 10  # both limits were exercised
+    if ki != 0.0:
+        assert np.any(ref.integral != 0.0)
+    # shared state: the checked step and the lean law continue each other
+    qt, vt, q, v = rng.normal(0.0, 0.1, (4, n))
+    assert ref.step(qt, vt, q, v, 0.002).tobytes() == lean.step(qt, vt, q, v, 0.002).tobytes()
+
+
+@pytest.mark.parametrize("compiled", COMPILED)
+def test_stepper_refuses_what_step_refuses(compiled):
+    pid = PidLaw(["x", "y"], kp=10.0, ki=0.0, kd=1.0)
+    with pytest.raises(ValueError, match="dt"):
+        pid.stepper(0.0)
+    law = pid.stepper(0.002, compiled=compiled)
+    zero = np.zeros(2)
+    for bad in (np.nan, np.inf, -np.inf):
+        for slot in range(4):
+            args = [zero.copy() for _ in range(4)]
+            args[slot][1] = bad
+            with pytest.raises(ValueError, match=r"non-finite.*'y'"):
+                law(*args)
+    with pytest.raises(ValueError, match="expected 2"):
+        law(np.zeros(3), zero, zero, zero)
+    # other array-likes take the checked path and give the same torques
+    np.testing.assert_array_equal(law([0.1, -0.2], [0, 0], [0, 0], [0, 0]),
+                                  pid.step([0.1, -0.2], [0, 0], [0, 0], [0, 0], 0.002))

@@ -205,3 +205,13 @@ def playback_step(s3, h, ref2, rho2, phi2, om2, k2d, gamma, gmu, gts, has_g, wor
     _stage(s, k3, h, tmp, 2)
     _playback_rhs(tmp, ref, rho, phi, om, k, gamma, gmu, gts, has_g, theta, k4)
     _combine(s, k1, k2, k3, k4, h, 2)
+
+
+@_jit
+def playback_derivative(s3, ref2, rho2, phi2, om2, k2d, gamma, gmu, gts, has_g, out3):
+    """d[x, y]/dt of the frozen network at `s3` into `out3` (2, B, N): `CPGNetwork.playback_rhs`."""
+    B, N = s3.shape[1], s3.shape[2]
+    M = B * N
+    theta = np.empty(M)
+    _playback_rhs(s3.reshape(5, M), ref2.reshape(M), rho2.reshape(M), phi2.reshape(M), om2.reshape(M),
+                  k2d.reshape(M), gamma, gmu, gts, has_g, theta, out3.reshape(2, M))

@@ -472,6 +472,17 @@ class CPGNetwork:
         if self._g is not None:  # (16), (17)
             out += s * ((self._g[:, None] * self._ts_play) / np.maximum(np.sqrt(r2), R_FLOOR))
 
+    def playback_derivative(self, out: np.ndarray) -> None:
+        """d[x, y]/dt of the frozen network at its state (and the `feedback` of the last step) into `out`
+        (2, B, N): `playback_rhs`, by the compiled kernel when `uses_numba` (same expressions)."""
+        kern, g = self._kern, self._g
+        if kern is None:
+            self.playback_rhs(self._s[:2], None, out)
+        else:
+            kern.playback_derivative(self._s, self._ref, self._rho, self._phi_play, self._om_play,
+                                     self._k_play, self._pb_gamma, self._pb_gmu,
+                                     self._g_none if g is None else g * self._pb_ts, g is not None, out)
+
     # ---------------------------------------------------------------- learning / playback switches
     def freeze(self) -> None:
         """End learning: F = 0, ω, α, φ fixed; the learned signal stays as the limit cycle."""

@@ -19,6 +19,7 @@ SECTIONS: dict[str, str] = {
     "cpg": "cpg_walker.experiments.bench_cpg:run",
     "robot": "cpg_walker.experiments.bench_robot:run",
     "humanoid": "cpg_walker.experiments.bench_humanoid:run",
+    "loop": "cpg_walker.experiments.bench_loop:run",
     "graph": "cpg_walker.experiments.bench_graph:run",
 }
 

@@ -7,6 +7,7 @@ row per sample at a uniform period. The two packaged recordings are ``walk`` and
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,14 +89,37 @@ def load_gait(name_or_path: str | Path, min_rows: int = 2) -> Gait:
 
     Raises FileNotFoundError for a missing file and ValueError ``"<file>:<line>: <what>"`` for a broken one
     (no/unknown/duplicate header names, wrong field count, non-numeric or non-finite value, time not
-    increasing or not uniformly sampled, too few rows)."""
+    increasing or not uniformly sampled, too few rows). The same file content loads once per process:
+    later calls return the same Gait, whose arrays are read-only."""
     path = gait_path(name_or_path)
     if not path.is_file():
         known = ", ".join(PACKAGED)
         raise FileNotFoundError(f"gait file not found: {path} (packaged gaits: {known})")
     name = str(name_or_path) if str(name_or_path) in PACKAGED else path.stem
-    with path.open("r", encoding="utf-8", newline="") as fh:
-        lines = fh.read().splitlines()
+    raw = path.read_bytes()
+    key = (hashlib.blake2b(raw, digest_size=16).digest(), str(path), name, min_rows)
+    return _cached(_GAITS, key, lambda: _parse_gait(raw, path, name, min_rows))
+
+
+def _cached(cache: dict, key: tuple, compute):
+    """``cache[key]``, computed on a miss; the cache is emptied when it holds 32 entries."""
+    value = cache.get(key)
+    if value is None:
+        value = compute()
+        if len(cache) >= 32:
+            cache.clear()
+        cache[key] = value
+    return value
+
+
+#: load_gait's results by (content digest, path as given, name, min_rows): a process that walks many times
+#: (sweeps, gain searches) parses each recording once. A changed file has another digest, so it is read anew.
+_GAITS: dict[tuple, Gait] = {}
+
+
+def _parse_gait(raw: bytes, path: Path, name: str, min_rows: int) -> Gait:
+    """The Gait in ``raw`` (the bytes of ``path``), with read-only arrays: `load_gait` shares it."""
+    lines = raw.decode("utf-8").splitlines()
     if not lines or not lines[0].strip():
         raise ValueError(f"{path}:1: empty file; expected a header 'time_s,<joint>,...'")
     header = [h.strip() for h in lines[0].split(",")]
@@ -141,7 +165,11 @@ def load_gait(name_or_path: str | Path, min_rows: int = 2) -> Gait:
     if np.any(off):
         i = int(np.argmax(off))
         raise ValueError(f"{path}:{i + 3}: non-uniform sampling: step {steps[i]:g} s, expected {dt:g} s")
-    return Gait(name=name, names=tuple(names), t=t - t[0], q=data[:, 1:], source=str(path))
+    t = t - t[0]
+    q = data[:, 1:]
+    t.setflags(write=False)
+    q.setflags(write=False)
+    return Gait(name=name, names=tuple(names), t=t, q=q, source=str(path))
 
 
 def _is_float(text: str) -> bool:
@@ -188,12 +216,25 @@ def estimate_period(gait: Gait, settle: float | None = None, lo: float = 1.5, hi
 
 
 def find_steady_cycle(gait: Gait, tail: float = 0.8, spread: float = 0.15, window: float = 0.03) -> Cycle:
-    """The last full stride of the recording, with its seam where the signal matches best.
+    """The last full stride of the recording, with its seam where the signal matches best (cached by
+    the recording's content and the arguments: the search takes about a second).
 
     The cycle ends at some ``e`` in the last ``tail`` seconds and starts at ``e - T`` with ``T`` within
     ``spread`` of the autocorrelation period; ``(start, T)`` minimise the squared mismatch of the leg angles
     (and of their velocities, weighted by 0.05 s) over a ``window`` around the seam, so repeating
     ``[start, start + T)`` after the recording continues it without a jump."""
+    digest = hashlib.blake2b(digest_size=16)
+    head = repr((gait.names, gait.t.shape, gait.t.dtype.str, gait.q.shape, gait.q.dtype.str)).encode()
+    for part in (head, gait.t, gait.q):
+        digest.update(np.ascontiguousarray(part).data if isinstance(part, np.ndarray) else part)
+    key = (digest.hexdigest(), float(tail), float(spread), float(window))
+    return _cached(_CYCLES, key, lambda: _search_steady_cycle(gait, tail, spread, window))
+
+
+_CYCLES: dict[tuple, Cycle] = {}  # find_steady_cycle's results by (content digest, arguments)
+
+
+def _search_steady_cycle(gait: Gait, tail: float, spread: float, window: float) -> Cycle:
     period = estimate_period(gait)
     legs = [gait.names.index(j) for j in LEG_JOINTS if j in gait.names]
     q = gait.q[:, legs]
@@ -238,6 +279,10 @@ class GaitPlayback:
         self._src = np.array([j for _, j in cols], dtype=int)
         self._base = base
         self._vel = gait.velocities()
+        # targets(t) interpolates only the played columns (Gait.at's arithmetic, for one scalar time)
+        self._q_src = np.ascontiguousarray(gait.q[:, self._src])
+        self._vel_src = np.ascontiguousarray(self._vel[:, self._src])
+        self._dt, self._duration, self._last = gait.dt, gait.duration, len(gait.t) - 1
 
     def recording_time(self, t: float) -> float:
         """Time in the recording that plays at time ``t`` (folds times after the cycle's end into it)."""
@@ -250,10 +295,17 @@ class GaitPlayback:
         tr = self.recording_time(t)
         q = self._base.copy()
         qd = np.zeros(len(self.names))
-        qr = self.gait.at(tr)
-        k = min(round(tr / self.gait.dt), len(self._vel) - 1)
-        q[self._dst] = qr[self._src]
-        qd[self._dst] = self._vel[k, self._src]
+        dt, last = self._dt, self._last
+        tt = tr if tr > 0.0 else 0.0  # Gait.at: np.clip(t, 0, duration), then linear interpolation
+        if not tt < self._duration:
+            tt = self._duration
+        idx = tt / dt
+        i0 = min(max(math.floor(idx), 0), last)
+        i1 = min(i0 + 1, last)
+        w = idx - i0
+        qs = self._q_src
+        q[self._dst] = qs[i0] * (1.0 - w) + qs[i1] * w
+        qd[self._dst] = self._vel_src[min(round(tr / dt), last)]
         return q, qd
 
     def standing_posture(self) -> np.ndarray:

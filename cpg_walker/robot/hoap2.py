@@ -208,6 +208,17 @@ class Hoap2Sim:
                 self._push_until = -1.0
             mujoco.mj_step(self.model, self.data)
 
+    def set_torque_unchecked(self, torque: np.ndarray, within_limits: bool = False) -> None:
+        """Hold ``torque`` from now on, as ``step(torque, 0)`` would (clamped to the motor limits), without
+        its checks: for a loop that hands over a finite float array of len(JOINT_NAMES) it has validated
+        itself (walker/loop.py: the PID stepper returns finite torques or raises). ``within_limits``: the
+        caller guarantees |torque| <= ``max_torque`` (the clamp would change nothing and is skipped)."""
+        if not within_limits:
+            mt = self.max_torque
+            torque = np.maximum(torque, -mt)
+            np.minimum(torque, mt, out=torque)  # = np.clip(torque, -max, max) for finite values
+        self.data.ctrl[self._act] = torque
+
     def apply_push(self, force: Sequence[float], duration: float = 0.1) -> None:
         """Push the torso at its CoM with a world-frame force (N) for ``duration`` s of sim time."""
         f = np.asarray(force, dtype=float)
@@ -249,7 +260,8 @@ class Hoap2Sim:
 
     def sole_loads(self) -> tuple[float, float]:
         """Normal force (N) the floor exerts on the (left, right) sole plate."""
-        return float(self._read("lleg_sole_load")[0]), float(self._read("rleg_sole_load")[0])
+        sd = self.data.sensordata
+        return float(sd[self._sensor["lleg_sole_load"][0]]), float(sd[self._sensor["rleg_sole_load"][0]])
 
     def base_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Torso origin position (m) and orientation quaternion (w, x, y, z), world frame."""

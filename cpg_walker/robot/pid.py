@@ -11,7 +11,8 @@ no-load speed). Non-finite inputs are refused with a ValueError naming the joint
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+import sys
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -113,16 +114,25 @@ class PidLaw:
         return arr
 
     def step(self, target_pos, target_vel, measured_pos, measured_vel, dt: float) -> np.ndarray:
-        """Torques (N*m) for one control period ``dt`` (s); updates the integral. ``dt`` = 0 is the first
-        sample of a run (no interval yet: the integral does not change)."""
-        if not (math.isfinite(dt) and dt >= 0):
-            raise ValueError(f"PID dt must be a finite number >= 0, got {dt!r}")
+        """Torques (N*m) for one control period ``dt`` (s); updates the integral. Every input is checked.
+        ``dt`` = 0 is the first sample of a run (no interval yet: the integral does not change)."""
+        self._check_dt(dt, first_sample=True)
         qt = self._check("target_pos", target_pos)
         vt = self._check("target_vel", target_vel)
         q = self._check("measured_pos", measured_pos)
         v = self._check("measured_vel", measured_vel)
         err = qt - q
         pd = self.kp * err + self.kd * (vt - v)
+        return self._torque(err, pd, v, dt)
+
+    @staticmethod
+    def _check_dt(dt: float, first_sample: bool = False) -> None:
+        if not (math.isfinite(dt) and (dt > 0 or (first_sample and dt == 0))):
+            raise ValueError(f"PID dt must be a positive number (0 only for a run's first sample), "
+                             f"got {dt!r}")
+
+    def _torque(self, err: np.ndarray, pd: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
+        """The law from the error q* - q and the PD term: conditional integration, clamps, velocity limit."""
         candidate = self.integral + err * dt
         i_term = self.ki * candidate
         saturated = np.abs(pd + i_term) > self.max_torque
@@ -137,3 +147,101 @@ class PidLaw:
             over = (np.abs(v) > self.max_velocity) & (np.sign(tau) == np.sign(v))
             tau = np.where(over, 0.0, tau)
         return tau
+
+    def stepper(self, dt: float, compiled: bool | None = None
+                ) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+        """``step`` at a fixed period ``dt`` for a loop that calls it every period (walker/loop.py).
+
+        ``dt`` is checked here, once. A call ``f(target_pos, target_vel, measured_pos, measured_vel)``
+        takes float arrays of len(names) and returns the torques ``step`` returns (the same operations,
+        equal to the last bit; the integral is shared with ``step``; the gains are those of now). It
+        skips the per-input checks: a non-finite input makes its joint's PD term non-finite, which the
+        lean law detects (one reduction), and such a call, or one whose inputs are not arrays of the
+        right shape, goes through the checked ``step``, which refuses it naming the joint. With every
+        ki = 0 and every torque limit > 0 (the configured servos) the integral stays 0 (``step`` clamps
+        it to 0), so the lean law leaves it out, and ``compiled`` runs it as a numba kernel
+        (``_lean_pd_law``); None = compiled when numba is already loaded in this process (the CPG's
+        kernels load it), so a replay of a recording does not pay numba's import."""
+        self._check_dt(dt)
+        kp, kd, mt = self.kp, self.kd, self.max_torque
+        neg_mt = -mt
+        n = len(self.names)
+        shape = (n,)
+        err, pd, dv = np.empty(n), np.empty(n), np.empty(n)
+        vmax = self.max_velocity
+        has_vmax, vmax_value = vmax is not None, 0.0 if vmax is None else vmax
+        no_integral = not np.any(self.ki)
+        if no_integral:
+            self.integral[:] = 0.0  # what the first step's clamp to +-0 would do
+        lean_clamp = no_integral and bool(np.all(mt > 0))  # max/min = np.clip's result for limits > 0
+        kernel = _lean_pd_kernel(compiled) if lean_clamp else None
+        ndarray, isfinite, f8, empty = np.ndarray, math.isfinite, np.dtype(float), np.empty
+        add_reduce, max_reduce = np.add.reduce, np.maximum.reduce
+        add, subtract, multiply, maximum, minimum = np.add, np.subtract, np.multiply, np.maximum, np.minimum
+
+        def lean(qt: np.ndarray, vt: np.ndarray, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+            if not (type(qt) is ndarray and type(vt) is ndarray and type(q) is ndarray
+                    and type(v) is ndarray and qt.shape == shape and vt.shape == shape
+                    and q.shape == shape and v.shape == shape):
+                return self.step(qt, vt, q, v, dt)
+            if kernel is not None and qt.dtype is f8 and vt.dtype is f8 and q.dtype is f8 and v.dtype is f8:
+                tau = empty(n)
+                if kernel(qt, vt, q, v, kp, kd, mt, has_vmax, vmax_value, tau):
+                    return tau
+                return self.step(qt, vt, q, v, dt)  # a non-finite input: refused, naming the joint
+            subtract(qt, q, out=err)
+            multiply(kp, err, out=pd)
+            subtract(vt, v, out=dv)
+            multiply(dv, kd, out=dv)
+            add(pd, dv, out=pd)
+            if not isfinite(add_reduce(pd)):  # a non-finite input (or an overflow): the checked law
+                return self.step(qt, vt, q, v, dt)
+            if not lean_clamp:
+                return self._torque(err, pd, v, dt)  # allocates its result
+            add(pd, 0.0, out=pd)  # + ki*integral = +0.0 (turns a -0.0 PD term into +0.0, as step does)
+            tau = maximum(pd, neg_mt)
+            minimum(tau, mt, out=tau)
+            if has_vmax:
+                np.abs(v, out=dv)
+                if max_reduce(dv) > vmax:
+                    tau[(dv > vmax) & (np.sign(tau) == np.sign(v))] = 0.0
+            return tau
+
+        return lean
+
+
+def _lean_pd_law(qt, vt, q, v, kp, kd, mt, has_vmax, vmax, out) -> bool:  # pragma: no cover (compiled)
+    """`PidLaw.step` with ki = 0 and limits > 0, element by element in the same operations (the torque
+    into ``out``); False, with ``out`` unfinished, if a PD term is not finite (a non-finite input)."""
+    for j in range(qt.shape[0]):
+        p = kp[j] * (qt[j] - q[j]) + kd[j] * (vt[j] - v[j])
+        if not math.isfinite(p):
+            return False
+        p = p + 0.0  # + ki*integral (+0.0)
+        lo, hi = -mt[j], mt[j]
+        p = p if p > lo else lo  # np.clip(p, lo, hi) = min(max(p, lo), hi) as numpy orders it
+        p = p if p < hi else hi
+        if has_vmax and abs(v[j]) > vmax and ((p > 0.0 and v[j] > 0.0) or (p < 0.0 and v[j] < 0.0)):
+            p = 0.0  # the velocity limit: sign(tau) == sign(v) != 0
+        out[j] = p
+    return True
+
+
+_KERNEL: Callable | bool | None = False  # False: not built yet; None: numba is not installed
+
+
+def _lean_pd_kernel(compiled: bool | None) -> Callable | None:
+    """``_lean_pd_law`` compiled by numba (built on first use, cached on disk), or None (see stepper)."""
+    global _KERNEL
+    if compiled is False or (compiled is None and "numba" not in sys.modules):
+        return None
+    if _KERNEL is False:
+        try:
+            from numba import njit
+        except ImportError:
+            _KERNEL = None
+        else:
+            _KERNEL = njit(cache=True)(_lean_pd_law)
+    if _KERNEL is None and compiled:
+        raise ImportError("compiled PID law requested but numba is not installed (pip install numba)")
+    return _KERNEL  # type: ignore[return-value]

@@ -399,7 +399,7 @@ class HumanoidCPG:
 
     def _filter(self, state: np.ndarray, command: float, dt: float) -> bool:
         """Advance the cascaded lags exactly over dt; True if the output changed."""
-        if np.all(state == command):
+        if state[0] == command and state[1] == command and state[2] == command:  # settled (cheap test)
             return False
         T = self.settings.modulation_time_constant
         if T <= 0:
@@ -425,7 +425,7 @@ class HumanoidCPG:
     def joint_targets(self) -> tuple[np.ndarray, np.ndarray]:
         """(q*, q̇*) of the 10 DOFs: offset + gain·Σ α x and its time derivative (α held)."""
         net = self.net
-        net.playback_rhs(net.state[:2], None, self._deriv)
+        net.playback_derivative(self._deriv)
         q = net.output()
         qd = net.gain * np.einsum("bi,bi->b", net.alpha, self._deriv[0])
         return q, qd

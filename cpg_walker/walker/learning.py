@@ -76,7 +76,8 @@ def load_controller(cpg_file: str | Path | None,
         if n_oscillators is not None and ctrl.net.N != n_oscillators:
             raise ValueError(f"{path} has {ctrl.net.N} oscillators per DOF, {n_oscillators} were asked for")
         return ctrl, str(path), bool(ctrl.meta.get("learning", {}).get("converged", True))
-    settings, params = learning_settings(n_oscillators)
-    ctrl, report = HumanoidCPG.learn(settings=settings, params=params)
+    cfg = load_learning_config()
+    settings, params = learning_settings(n_oscillators, cfg)
+    ctrl, report = HumanoidCPG.learn(cfg.get("gait", "walk"), settings, params)
     origin = f"learned at start-up (N={ctrl.net.N}, {report.wall_time_s:.1f} s)"
     return ctrl, origin, bool(report.converged)

@@ -13,7 +13,6 @@ feedback, cpg/feedback.py).
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -80,11 +79,12 @@ def run_replay(
         raise ValueError("replay: duration and rate must be positive, delay non-negative")
     if tuple(source.names) != tuple(pid.names):
         raise ValueError("replay: the target source and the PID must cover the same joints in the same order")
-    sel = [JOINT_NAMES.index(n) for n in pid.names]
+    sel = np.array([JOINT_NAMES.index(n) for n in pid.names], dtype=int)
+    all_joints = tuple(pid.names) == JOINT_NAMES
+    qadr, dadr = sim._qadr[sel], sim._dadr[sel]
     dt = sim.dt
     per_tick = max(1, round(1.0 / (rate_hz * dt)))
     delay_steps = round(delay_s / dt)
-    history: deque = deque(maxlen=delay_steps + 1)
     n_steps = round(duration / dt)
     log_every = max(1, round(log_dt / dt))
     t0 = sim.time
@@ -94,20 +94,22 @@ def run_replay(
     fell, fall_time = False, None
     tau_full = np.zeros(len(JOINT_NAMES))
     pid.reset()
+    law = pid.stepper(per_tick * dt)  # checked once here; it refuses non-finite inputs by itself
+    within = bool(np.all(pid.max_torque <= sim.max_torque[sel]))  # the law's clamp implies the motors'
     observe = getattr(source, "observe", None)
-    for k in range(n_steps):
-        history.append((sim.data.qpos[sim._qadr].copy(), sim.data.qvel[sim._dadr].copy()))
-        if k % per_tick == 0:
-            q, v = history[0]
-            if observe is not None:
-                observe(sim.time - t0, sim.imu().tilt(), sim.sole_loads())
-            qt, vt = source.targets(sim.time - t0)
-            tau_full[sel] = pid.step(qt, vt, q[sel], v[sel], per_tick * dt)
-            sim.step(tau_full, 1)
-        else:
-            sim.step(None, 1)
-        if (k + 1) % log_every == 0:
-            t = sim.time - t0
+    targets = source.targets
+    data, step, set_torque = sim.data, sim.step, sim.set_torque_unchecked
+    qpos, qvel = data.qpos, data.qvel  # views of MuJoCo's buffers (fixed for the life of `data`)
+    # Events happen at boundaries b (b physics steps done), in this order: a log sample (b > 0, a multiple
+    # of log_every; it stops a fallen run), keeping the state (b = 0, or a state a later tick will see),
+    # a control tick (b a multiple of per_tick, acting on the state of step max(0, b - delay_steps)).
+    # Between boundaries the physics runs with the torque held, in one `sim.step` call.
+    record_phase = -delay_steps % per_tick  # (b + delay_steps) % per_tick == 0: a tick will see b
+    kept: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    b = 0
+    while True:
+        if b and b % log_every == 0:
+            t = data.time - t0
             loads = sim.sole_loads()
             touch.update(t, loads)
             pos, _ = sim.base_pose()
@@ -124,6 +126,27 @@ def run_replay(
                 fell, fall_time = True, t
                 if stop_on_fall:
                     break
+        if b >= n_steps:
+            break
+        if b == 0 or b % per_tick == record_phase:
+            kept[b] = (qpos[qadr], qvel[dadr])  # fancy indexing copies
+        if b % per_tick == 0:
+            j = b - delay_steps
+            q, v = kept.pop(j) if j > 0 else kept[0]
+            if observe is not None:
+                observe(data.time - t0, sim.imu().tilt(), sim.sole_loads())
+            qt, vt = targets(data.time - t0)
+            if all_joints:
+                set_torque(law(qt, vt, q, v), within)
+            else:
+                tau_full[sel] = law(qt, vt, q, v)
+                set_torque(tau_full, within)
+        nxt = min(b + per_tick - b % per_tick,  # next tick
+                  b + (record_phase - b - 1) % per_tick + 1,  # next kept state
+                  b + log_every - b % log_every,  # next log sample
+                  n_steps)
+        step(None, nxt - b)
+        b = nxt
     result = ReplayResult(
         t=np.array(rows_t), base_xy=np.array(rows_xy), base_z=np.array(rows_z),
         heading=np.unwrap(np.array(rows_h)), loads=np.array(rows_l), touchdowns=touch.events,
