@@ -145,6 +145,15 @@ class Probe:
                 next_each = now + 0.01
             self.executor.spin_once(timeout_sec=0.01)
 
+    def wait_endpoints(self, topic: str, publishers: int = 1, subscribers: int = 1) -> None:
+        """Wait until the graph shows at least ``publishers`` and ``subscribers`` on ``topic`` (this probe's
+        own included). Before a sim starts its clock: a node publishes each tick's message once, so an
+        endpoint pair still being matched when the first tick comes would lose it."""
+        self.wait(lambda: self.node.count_publishers(topic) >= publishers
+                  and self.node.count_subscribers(topic) >= subscribers,
+                  lambda: f"{topic}: {self.node.count_publishers(topic)} publishers, "
+                          f"{self.node.count_subscribers(topic)} subscribers", START_S)
+
     def call(self, srv_type, name: str, timeout: float = ANSWER_S):
         client = self.node.create_client(srv_type, name)
         assert client.wait_for_service(timeout_sec=timeout), f"service {name} not available"

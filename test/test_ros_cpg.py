@@ -60,8 +60,8 @@ def test_targets_state_and_diagnostics_published(graph, probe):
         probe.listen(topic, kind, 200)
     graph.start("pid_node", lockstep=True, wait_for_targets=True)
     cpg = graph.start("cpg_node")
-    pubs = lambda: probe.node.count_publishers("/cpg/state") > 0  # noqa: E731
-    probe.wait(pubs, lambda: f"/cpg/state published: {cpg.log()}", START_S)  # before the clock starts
+    probe.wait_endpoints("/joint_targets", 1, 2)  # cpg -> pid (and the probe) before the clock starts
+    probe.wait_endpoints("/clock", 0, 1)
     graph.start("sim_node", pacing="lockstep", duration=30.0)
     got = probe.received
     probe.wait(lambda: len(got["/cpg/state"]) >= 3 and sum(
@@ -137,7 +137,8 @@ def test_runtime_zeta_and_alpha_change_the_gait(graph, probe, tmp_path):
     record = tmp_path / "record.json"
     graph.start("pid_node", lockstep=True, wait_for_targets=True, target_wait=ANSWER_S)
     cpg = graph.start("cpg_node")
-    probe.wait(lambda: probe.node.count_publishers("/cpg/state") > 0, "/cpg/state published", START_S)
+    probe.wait_endpoints("/joint_targets")  # cpg -> pid before the clock starts
+    probe.wait_endpoints("/clock", 0, 1)
     # ended by SIGINT once the test has seen enough (the sim writes its record at exit); 120 s: a cap
     graph.start("sim_node", pacing="lockstep", duration=120.0, record_path=str(record))
     diags = lambda: [d for _, m in probe.received["/diagnostics"] if (d := _diag(m))]  # noqa: E731
