@@ -1,10 +1,104 @@
-"""Helpers of the multi-process ROS tests: a probe node in the test process and parameter calls through
-the real parameter services. The ``graph`` and ``probe`` fixtures built on them are in conftest.py."""
+"""Helpers of the multi-process ROS tests: the wall-clock deadlines, a DDS domain reserved for one test, a
+probe node in the test process (waits for conditions, parameter calls through the real parameter services)
+and a watchdog that ends a graph whose sim time stops advancing. The fixtures built on them are in
+conftest.py.
+
+Timing rule of these tests: a wall-clock deadline only ends a test that hangs (a process that never
+starts, a message that never comes, a sim that stops advancing); it is never a claim about speed. Rates
+are asserted in sim time, from the messages' stamps; wall-clock rates and durations are measured by the
+benchmark (``cpg-walker bench``, experiments/bench_graph.py)."""
 
 from __future__ import annotations
 
+import fcntl
+import os
+import random
+import signal
+import sys
+import tempfile
+import threading
 import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO
 
+#: Wall s for node processes to start and be discovered (imports, numba, DDS discovery): took up to ~25 s
+#: on the 2-core machine with two suites and other jobs running beside (see README, "Tests under load").
+START_S = 180.0
+#: Wall s for one thing to follow once the graph is up: a service answer, a log line, a message.
+ANSWER_S = 90.0
+#: The slowest sim a test waits for without calling it a hang: 1/20 of real time (lockstep graphs ran at
+#: ~0.3-1x real time on that loaded machine).
+MIN_REAL_TIME_FACTOR = 0.05
+
+
+def sim_deadline(sim_s: float) -> float:
+    """Wall s to allow a graph for ``sim_s`` sim seconds, start-up included (a hang guard, see above)."""
+    return START_S + sim_s / MIN_REAL_TIME_FACTOR
+
+
+# ------------------------------------------------------------------------------------- DDS domain
+
+LOCK_DIR = Path(tempfile.gettempdir()) / "cpg_walker_test_domains"
+
+
+def reserve_domain() -> tuple[int, IO]:
+    """A DDS domain in 1..101 held by this process alone (an exclusive ``flock`` on its lock file, released
+    when the returned file is closed or the process dies) on which no other node is seen: two test runs
+    on one machine never share a domain, whatever their timing."""
+    from cpg_walker.nodes.graph import domain_is_quiet
+
+    LOCK_DIR.mkdir(exist_ok=True)
+    candidates = list(range(1, 102))
+    random.SystemRandom().shuffle(candidates)
+    for domain in candidates:
+        lock = open(LOCK_DIR / f"{domain}.lock", "w")  # held until the test ends
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.close()
+            continue
+        if domain_is_quiet(domain, wait=1.0):
+            return domain, lock
+        lock.close()
+    raise RuntimeError(f"no free DDS domain in 1..101 (locks in {LOCK_DIR})")
+
+
+def node_pids(domain: int) -> list[int]:
+    """Node processes (python -m cpg_walker.nodes.*) of this test run on ``domain``: same interpreter and
+    PYTHONPATH as this process, ROS_DOMAIN_ID=domain (read from /proc)."""
+    want_env = f"ROS_DOMAIN_ID={domain}".encode()
+    path = os.environ.get("PYTHONPATH")
+    want_path = None if path is None else f"PYTHONPATH={path}".encode()
+    pids = []
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            cmd = (proc / "cmdline").read_bytes().split(b"\0")
+            env = (proc / "environ").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if len(cmd) < 3 or not cmd[2].startswith(b"cpg_walker.nodes.") or want_env not in env:
+            continue
+        paths = [e for e in env if e.startswith(b"PYTHONPATH=")]
+        if cmd[0] == sys.executable.encode() and paths == ([] if want_path is None else [want_path]):
+            pids.append(int(proc.name))
+    return pids
+
+
+def kill_nodes(domain: int) -> list[int]:
+    """SIGKILL this run's node processes on ``domain``; their pids."""
+    pids = node_pids(domain)
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    return pids
+
+
+# ------------------------------------------------------------------------------------------ probe
 
 class Probe:
     """An rclpy node in the test process, on the graph's domain, that records what it receives."""
@@ -28,6 +122,7 @@ class Probe:
             (time.monotonic(), m)), qos)
 
     def spin_for(self, seconds: float, until=None) -> bool:
+        """Spin ``seconds`` wall s, or until ``until()``; whether ``until()`` came true (True without it)."""
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.01)
@@ -35,17 +130,41 @@ class Probe:
                 return True
         return until is None
 
-    def call(self, srv_type, name: str, timeout: float = 10.0):
+    def wait(self, until: Callable[[], bool], what: str | Callable[[], str], timeout: float = ANSWER_S,
+             each: Callable[[], None] | None = None) -> None:
+        """Spin until ``until()``; AssertionError ``what`` (text, or a function giving it) when ``timeout``
+        wall s pass first. ``each()``, if given, runs every 10 ms meanwhile (e.g. to keep publishing)."""
+        now = time.monotonic()
+        end, next_each = now + timeout, now
+        while not until():
+            now = time.monotonic()
+            if now > end:
+                raise AssertionError(f"not within {timeout:g} s: {what() if callable(what) else what}")
+            if each is not None and now >= next_each:
+                each()
+                next_each = now + 0.01
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def wait_endpoints(self, topic: str, publishers: int = 1, subscribers: int = 1) -> None:
+        """Wait until the graph shows at least ``publishers`` and ``subscribers`` on ``topic`` (this probe's
+        own included). Before a sim starts its clock: a node publishes each tick's message once, so an
+        endpoint pair still being matched when the first tick comes would lose it."""
+        self.wait(lambda: self.node.count_publishers(topic) >= publishers
+                  and self.node.count_subscribers(topic) >= subscribers,
+                  lambda: f"{topic}: {self.node.count_publishers(topic)} publishers, "
+                          f"{self.node.count_subscribers(topic)} subscribers", START_S)
+
+    def call(self, srv_type, name: str, timeout: float = ANSWER_S):
         client = self.node.create_client(srv_type, name)
         assert client.wait_for_service(timeout_sec=timeout), f"service {name} not available"
         future = client.call_async(srv_type.Request())
-        self.spin_for(timeout, until=future.done)
-        assert future.done(), f"no answer from {name}"
+        self.wait(future.done, f"an answer from {name}", timeout)
         return future.result()
 
-    def set_param(self, node: str, name: str, value, timeout: float = 20.0):
+    def set_param(self, node: str, name: str, value, timeout: float = START_S):
         """Set one parameter of ``/node`` through its set_parameters service; the SetParametersResult.
-        ``value``: a float (sent as a double) or a ready rcl_interfaces ParameterValue."""
+        ``value``: a float (sent as a double) or a ready rcl_interfaces ParameterValue. ``timeout``: for
+        the service to show up (the node may still be starting)."""
         from rcl_interfaces.msg import Parameter
         from rcl_interfaces.srv import SetParameters
 
@@ -56,7 +175,7 @@ class Probe:
             self._param_clients[node] = client
         value = value if not isinstance(value, float | int) else double(value)
         future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
-        assert self.spin_for(10.0, until=future.done), f"no answer setting {node}.{name}"
+        self.wait(future.done, f"an answer setting {node}.{name}")
         return future.result().results[0]
 
     def get_params(self, node: str, names: list[str]) -> list:
@@ -64,9 +183,9 @@ class Probe:
         from rcl_interfaces.srv import GetParameters
 
         get = self.node.create_client(GetParameters, f"/{node}/get_parameters")
-        assert get.wait_for_service(timeout_sec=10.0)
+        assert get.wait_for_service(timeout_sec=START_S), f"/{node}/get_parameters not available"
         future = get.call_async(GetParameters.Request(names=names))
-        assert self.spin_for(10.0, until=future.done)
+        self.wait(future.done, f"an answer from /{node}/get_parameters")
         return list(future.result().values)
 
     def close(self) -> None:
@@ -89,3 +208,59 @@ def string(s: str):
     from rcl_interfaces.msg import ParameterType, ParameterValue
 
     return ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=s)
+
+
+# --------------------------------------------------------------------------------------- watchdog
+
+class SimWatchdog:
+    """Ends a graph run that has hung, however slowly it is allowed to go: a thread listens to
+    /diagnostics on ``domain`` (the sim and cpg_node publish them only as sim time advances) and, when
+    nothing comes for ``stall_s`` wall s, SIGKILLs this run's nodes on the domain, which makes the
+    blocked run fail; leaving the ``with`` block then raises AssertionError naming the stall.
+
+        with SimWatchdog(domain):
+            run_graph_walk(out, duration=60.0, timeout=sim_deadline(60.0))
+    """
+
+    def __init__(self, domain: int, stall_s: float = START_S):
+        self.domain, self.stall_s = domain, stall_s
+        self.messages = 0
+        self.sim_time = 0.0
+        self.fired: str | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="sim-watchdog", daemon=True)
+
+    def _run(self) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        from cpg_walker.nodes.messages import stamp_ns
+
+        probe = Probe(self.domain)
+        try:
+            def seen(msg) -> None:
+                self.messages += 1
+                self.sim_time = stamp_ns(msg) / 1e9
+
+            probe.node.create_subscription(DiagnosticArray, "/diagnostics", seen, 10)
+            last, count = time.monotonic(), -1
+            while not self._stop.is_set():
+                probe.executor.spin_once(timeout_sec=0.1)
+                if self.messages != count:
+                    last, count = time.monotonic(), self.messages
+                elif time.monotonic() - last > self.stall_s:
+                    self.fired = (f"no sim progress (/diagnostics) for {self.stall_s:g} wall s; last sim "
+                                  f"time {self.sim_time:.3f} s after {self.messages} messages; killed "
+                                  f"nodes {kill_nodes(self.domain)}")
+                    return
+        finally:
+            probe.close()
+
+    def __enter__(self) -> SimWatchdog:
+        self._thread.start()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self._stop.set()
+        self._thread.join(timeout=ANSWER_S)
+        if self.fired:
+            raise AssertionError(self.fired) from exc
