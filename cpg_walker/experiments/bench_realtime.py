@@ -79,7 +79,8 @@ def scenario_run(subscribers: int, cpu_load: bool, duration: float, work: Path, 
         procs = []
         if cpu_load:  # the load runs for the whole walk, start-up included
             p = subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True,
-                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)  # its KeyboardInterrupt at the stop
             started.append(("cpu_load", p, Path("/dev/null")))
             procs.append(p)
         if subscribers:
