@@ -102,12 +102,15 @@ def test_param_args_keep_types():
 
 
 def test_joint_state_round_trip_and_validation_of_messages():
+    from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import JointState
 
     from cpg_walker.nodes.messages import JointStateBuilder, read_joint_command, stamp_ns
 
     q = np.linspace(-1, 1, len(JOINT_NAMES))
-    msg = JointStateBuilder(JOINT_NAMES).fill(1_234_000_000, position=q, velocity=2 * q)
+    raw = JointStateBuilder(JOINT_NAMES, fields=("position", "velocity")).fill(1_234_000_000, position=q,
+                                                                              velocity=2 * q)
+    msg = deserialize_message(raw, JointState)  # the builders return the message serialized
     assert stamp_ns(msg) == 1_234_000_000
     cmd = read_joint_command(msg)
     np.testing.assert_array_equal(cmd.position, q)

@@ -21,6 +21,7 @@ SECTIONS: dict[str, str] = {
     "humanoid": "cpg_walker.experiments.bench_humanoid:run",
     "loop": "cpg_walker.experiments.bench_loop:run",
     "graph": "cpg_walker.experiments.bench_graph:run",
+    "realtime": "cpg_walker.experiments.bench_realtime:run",
 }
 
 

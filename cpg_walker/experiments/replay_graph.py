@@ -14,12 +14,15 @@ its parameters, wait for the sim to finish, summarise its record. ``cpg-walker w
 from __future__ import annotations
 
 import json
+import subprocess
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from cpg_walker.nodes.graph import Graph
 from cpg_walker.nodes.runtime import PACINGS
 
 
@@ -93,6 +96,8 @@ def run_graph(
     timeout: float,
     pid_params: dict | None = None,
     tag: str = "graph",
+    node_params: dict[str, dict] | None = None,
+    attach: Callable[[Graph], list[subprocess.Popen]] | None = None,
 ) -> GraphRun:
     """Run sim_node + pid_node (+ ``target`` node with ``target_params``) for ``duration`` sim seconds.
     Each node gets its parameters file (config/<node>.yaml), then these arguments as overrides
@@ -100,8 +105,10 @@ def run_graph(
 
     The sim records the run to ``work_dir/<tag>_record.json``; node logs go to ``work_dir/<tag>_logs``.
     pid_node answers in lockstep when the sim does and waits for targets when there is a target node
-    (``pid_params`` override). Raises RuntimeError (with the sim's log tail) if the sim fails."""
-    from cpg_walker.nodes.graph import Graph
+    (``pid_params`` override). ``node_params``: more overrides by node executable (e.g. the scheduling
+    parameters); ``attach(graph)``, called once the nodes are started, may start more processes on the
+    graph's domain (subscribers, a CPU load) and returns them: they are stopped when the sim has finished.
+    Raises RuntimeError (with the sim's log tail) if the sim fails."""
     from cpg_walker.robot.run_record import RunRecord
 
     if pacing not in PACINGS:
@@ -111,15 +118,21 @@ def run_graph(
     record_path = work / f"{tag}_record.json"
     record_path.unlink(missing_ok=True)
     started = time.monotonic()
+    more = node_params or {}
     with Graph(work / f"{tag}_logs") as g:
         g.start("pid_node", **{"lockstep": pacing == "lockstep", "wait_for_targets": target is not None,
-                               **(pid_params or {})})
+                               **(pid_params or {}), **more.get("pid_node", {})})
         if target is not None:
-            g.start(target, **(target_params or {}))
+            g.start(target, **(target_params or {}), **more.get(target, {}))
         period = {} if control_period is None else {"control_period": float(control_period)}
         g.start("sim_node", pacing=pacing, duration=float(duration), stop_on_fall=stop_on_fall,
-                record_path=str(record_path), **period)
-        status = g.wait("sim_node", timeout)
+                record_path=str(record_path), **period, **more.get("sim_node", {}))
+        extra = attach(g) if attach is not None else []
+        try:
+            status = g.wait("sim_node", timeout)
+        finally:
+            for proc in extra:
+                stop_process(proc)
         cpu = {name: p.cpu_seconds() for name, p in g.procs.items() if name != "sim_node"}
         g.stop_all()
         logs = {name: p.log() for name, p in g.procs.items()}
@@ -130,6 +143,22 @@ def run_graph(
     record = RunRecord.load(record_path)
     return GraphRun(record=record, target=target, pacing=pacing,
                     control_period=float(record.stats["control_period_s"]), wall_s=wall, cpu_s=cpu, logs=logs)
+
+
+def stop_process(proc: subprocess.Popen, timeout: float = 5.0) -> None:
+    """SIGINT a helper process started beside the graph (in its own session), then SIGKILL."""
+    import os
+    import signal
+
+    if proc.poll() is None:
+        try:
+            os.killpg(proc.pid, signal.SIGINT)
+            proc.wait(timeout=timeout)
+        except (ProcessLookupError, PermissionError):
+            pass
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=timeout)
 
 
 def run_graph_replay(

@@ -23,8 +23,10 @@ from cpg_walker.nodes.runtime import (
     Throttle,
     bool_param,
     declare,
+    declare_scheduling,
     exit_log,
     float_param,
+    gc_summary,
     override_names,
     parse_cli,
     run_main,
@@ -40,7 +42,8 @@ subscribes: /joint_targets (sensor_msgs/JointState: position, optional velocity,
 publishes: /joint_torques (sensor_msgs/JointState: name + effort N*m, stamp = the answered state's)
 parameters: kp.<group>, ki.<group>, kd.<group> for group in leg, arm, body, head (and kp.<joint> ... for
   per-joint overrides given at start-up), max_torque, integral_limit, max_velocity (settable, validated);
-  target_timeout (sim s), lockstep, wait_for_targets, target_wait and startup_wait (wall s)"""
+  target_timeout (sim s), lockstep, wait_for_targets, target_wait and startup_wait (wall s);
+  realtime_priority, nice, cpu_affinity (OS scheduling)"""
 
 #: Upper ends of the gains' ranges (N*m/rad, N*m/(rad*s), N*m*s/rad): far above any stable HOAP-2 gain.
 GAIN_RANGES = {"kp": 2000.0, "ki": 2000.0, "kd": 200.0}
@@ -76,6 +79,7 @@ class PidNode(Node):
             "lockstep: wall s to wait for a target before the watchdog trips", 1e-3, 1e3)))
         self.startup_wait = float(declare(self, "startup_wait", float_param(
             "lockstep: wall s to wait for the first target", 1e-3, 1e4)))
+        self.scheduling = declare_scheduling(self)  # applied once started (runtime.settle_process)
         self.law = self._build_law({})
         self.add_on_set_parameters_callback(self._on_set)
 
@@ -89,7 +93,7 @@ class PidNode(Node):
         self.last_state_ns: int | None = None
         self.answered_ns: int | None = None
         self.pending = None  # (t_ns, q, v, wall time) waiting for its target (lockstep)
-        self.b_tau = JointStateBuilder(JOINT_NAMES)
+        self.b_tau = JointStateBuilder(JOINT_NAMES, fields=("effort",))
         self.pub = self.create_publisher(JointState, "/joint_torques", 10)
         subs = [self.create_subscription(JointState, "/joint_targets", self._on_target, 10),
                 self.create_subscription(JointState, "/joint_states", self._on_state, 10)]
@@ -240,7 +244,7 @@ class PidNode(Node):
         self.pub.publish(self.b_tau.fill(t_ns, effort=tau))
 
     def on_exit(self) -> None:
-        exit_log(self, "stats " + json.dumps(self.activity.summary()))
+        exit_log(self, "stats " + json.dumps({**self.activity.summary(), "gc": gc_summary(self)}))
 
 
 

@@ -149,6 +149,144 @@ class TickStats:
         return out
 
 
+class GcPauses:
+    """Python's cyclic garbage collector as seen from a control loop: collections per generation and how
+    long they held the interpreter (a collection stops every thread's Python code). ``install`` hooks
+    ``gc.callbacks`` (two clock reads per collection); ``summary`` in milliseconds."""
+
+    def __init__(self) -> None:
+        self.count = [0, 0, 0]
+        self.total_s = 0.0
+        self.max_s = 0.0
+        self._t0 = 0.0
+
+    def install(self) -> GcPauses:
+        import gc
+
+        gc.callbacks.append(self._callback)
+        return self
+
+    def _callback(self, phase: str, info: dict) -> None:
+        import time
+
+        if phase == "start":
+            self._t0 = time.perf_counter()
+            return
+        dt = time.perf_counter() - self._t0
+        self.count[info["generation"]] += 1
+        self.total_s += dt
+        self.max_s = max(self.max_s, dt)
+
+    def summary(self) -> dict:
+        import gc
+
+        return {"collections": list(self.count), "total_ms": round(self.total_s * 1e3, 3),
+                "max_ms": round(self.max_s * 1e3, 3), "frozen_objects": gc.get_freeze_count()}
+
+
+def declare_scheduling(node: Node) -> dict:
+    """Declare the OS scheduling parameters of a control node (values in its parameters file):
+    ``realtime_priority`` (SCHED_FIFO priority 1-99; 0 = none), ``nice`` (used when no real-time
+    priority is set or allowed; 0 = leave) and ``cpu_affinity`` (a taskset-style bit mask; 0 = any CPU).
+    Returns them (the mask as CPU numbers); ``apply_scheduling`` acts on them once the node has started."""
+    prio = declare(node, "realtime_priority", int_param(
+        "SCHED_FIFO priority (1-99) of the node's loop and middleware threads once started; 0 = normal "
+        "scheduling. Needs root or CAP_SYS_NICE, else the nice value is tried", 0, 99, read_only=True))
+    nice = declare(node, "nice", int_param(
+        "niceness (-20..19) when no real-time priority is set or permitted; 0 = leave as started", -20, 19,
+        read_only=True))
+    mask = declare(node, "cpu_affinity", int_param(
+        "CPUs the node's threads may run on, as a bit mask like taskset's (1 = CPU 0, 2 = CPU 1, 3 = both); "
+        "0 = any", 0, 2**63 - 1, read_only=True))
+    return {"realtime_priority": int(prio), "nice": int(nice), "cpu_affinity": cpus_of_mask(int(mask))}
+
+
+def cpus_of_mask(mask: int) -> list[int]:
+    """CPU numbers of a taskset-style bit mask (0 = none given: any CPU)."""
+    return [i for i in range(mask.bit_length()) if mask >> i & 1]
+
+
+def _thread_ids() -> list[tuple[int, str]]:
+    """(thread id, name) of this process's threads (Linux /proc)."""
+    import os
+
+    out = []
+    for entry in os.scandir("/proc/self/task"):
+        try:
+            with open(f"{entry.path}/comm") as fh:
+                out.append((int(entry.name), fh.read().strip()))
+        except OSError:
+            continue  # the thread has exited
+    return out
+
+
+def gc_summary(node: Node) -> dict | None:
+    """The node's garbage-collection pauses since ``settle_process`` (None if it was not settled)."""
+    pauses = getattr(node, "gc_pauses", None)
+    return pauses.summary() if pauses is not None else None
+
+
+def apply_scheduling(node: Node, request: dict) -> str:
+    """Give the running node the OS's help the request asks for, as far as it is permitted; log one info
+    line saying what is in effect, and return it. Threads: the node's loop (the main thread) and the
+    middleware's (DDS receive, event and discovery threads, named by the middleware); unnamed worker pools
+    (BLAS, numba) keep normal scheduling, so a spinning worker can never starve the machine. The affinity
+    applies to every thread. Where something is not permitted (no root / CAP_SYS_NICE, not Linux) the node
+    runs on with normal scheduling."""
+    import os
+
+    try:
+        threads = _thread_ids()
+    except OSError:
+        threads = []
+    main_name = next((name for tid, name in threads if tid == os.getpid()), None)
+    hot = [tid for tid, name in threads if tid == os.getpid() or name != main_name]
+    done: list[str] = []
+    skipped: list[str] = []
+    prio, nice, cpus = request["realtime_priority"], request["nice"], request["cpu_affinity"]
+    if prio > 0:
+        try:
+            for tid in hot:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(prio))
+            done.append(f"SCHED_FIFO priority {prio} on {len(hot)} threads")
+        except (OSError, AttributeError) as exc:
+            skipped.append(f"SCHED_FIFO not permitted ({exc.__class__.__name__})")
+            prio = 0
+    if prio == 0 and nice != 0:
+        try:
+            for tid in hot:
+                os.setpriority(os.PRIO_PROCESS, tid, nice)
+            done.append(f"nice {nice} on {len(hot)} threads")
+        except (OSError, AttributeError) as exc:
+            skipped.append(f"nice {nice} not permitted ({exc.__class__.__name__})")
+    if cpus:
+        try:
+            for tid, _ in threads or [(0, "")]:
+                os.sched_setaffinity(tid, cpus)
+            done.append(f"CPUs {','.join(map(str, cpus))}")
+        except (OSError, AttributeError) as exc:
+            skipped.append(f"CPU affinity {cpus} not applied ({exc.__class__.__name__})")
+    text = "scheduling: " + ("; ".join(done) if done else "normal")
+    if skipped:
+        text += " (" + "; ".join(skipped) + ")"
+    node.get_logger().info(text)
+    return text
+
+
+def settle_process(node: Node) -> None:
+    """After a control node's start-up: move every object allocated so far (modules, the learned CPG,
+    message types: ~150k objects) into the collector's permanent generation (``gc.freeze``), so a full
+    collection mid-walk does not traverse them; then the OS scheduling of ``node.scheduling`` (if any)."""
+    import gc
+
+    gc.collect()
+    gc.freeze()
+    node.gc_pauses = GcPauses().install()
+    request = getattr(node, "scheduling", None)
+    if request is not None:
+        apply_scheduling(node, request)
+
+
 class HotPath:
     """Take messages of a few subscriptions straight from rcl, bypassing the executor.
 
@@ -228,6 +366,7 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
     status = 0
     try:
         node = make_node()
+        settle_process(node)
         if loop is not None:
             loop(node)
         elif getattr(node, "hot", None) is not None:

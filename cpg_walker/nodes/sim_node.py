@@ -41,9 +41,11 @@ from cpg_walker.nodes.runtime import (
     Throttle,
     bool_param,
     declare,
+    declare_scheduling,
     exit_log,
     float_param,
     floats_param,
+    gc_summary,
     latency_summary,
     parse_cli,
     run_main,
@@ -66,7 +68,7 @@ services: ~/reset, ~/push (std_srvs/Trigger)
 parameters: pacing (realtime|fast|lockstep), control_period (s), real_time_factor, duration (sim s,
   0 = run until stopped), stop_on_fall, wait_for_controller, lockstep_resend (wall s), odom_period,
   diagnostics_period (sim s), imu_variance_floor, push.force [N,N,N], push.body, push.duration (s),
-  record_path, record_period (s)"""
+  record_path, record_period (s), realtime_priority, nice, cpu_affinity (OS scheduling, realtime pacing)"""
 
 #: Wall s between services of the executor (parameters, services) while the loop runs.
 SLOW_SPIN_PERIOD_S = 0.02
@@ -122,6 +124,10 @@ class SimNode(Node):
                                                       read_only=True))
         record_period = p("record_period", float_param("sim s between recorded samples", 1e-3, 1.0,
                                                        read_only=True))
+        scheduling = declare_scheduling(self)  # applied once started (runtime.settle_process) ...
+        if self.pacing != "realtime":  # ... and only with a wall-clock schedule to keep
+            scheduling.update(realtime_priority=0, nice=0)
+        self.scheduling = scheduling
         self.odom_every = max(1, round(odom * 1e9 / self.period_ns))
         self.diag_every = max(1, round(diag * 1e9 / self.period_ns))
         self.record = RunRecord(log_dt=self.period_ns * max(1, round(record_period * 1e9 / self.period_ns))
@@ -390,6 +396,7 @@ class SimNode(Node):
             "resends": self.resends, "cpu_s": round(time.process_time() - self.cpu_start, 3),
             "latency": latency_summary(self.latencies[1:]),
             "torque_age_s": {"mean": round(float(age.mean()), 6), "max": round(float(age.max()), 6)},
+            "gc": gc_summary(self),
         }
         self.record.stats = stats
         exit_log(self, f"done: {stats['sim_s']:.3f} sim s in {stats['wall_s']:.3f} wall s, "

@@ -58,7 +58,7 @@ class TargetPlayerNode(Node):
         self.start_ns = round(start * 1e9)
         self.last_tick_ns: int | None = None
         self.sent_ns: int | None = None
-        self.builder = JointStateBuilder(self.playback.names)
+        self.builder = JointStateBuilder(self.playback.names, fields=("position", "velocity"))
         self.pub = self.create_publisher(JointState, "/joint_targets", 10)
         self.activity = ActivityStats()
         self.hot = HotPath(self, [self.create_subscription(Clock, "/clock", self._on_clock, 100)])

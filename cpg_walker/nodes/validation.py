@@ -16,6 +16,9 @@ import numpy as np
 from cpg_walker.robot.joints import JOINT_NAMES
 
 _INDEX = {name: i for i, name in enumerate(JOINT_NAMES)}
+_ALL_NAMES = list(JOINT_NAMES)
+_ALL_INDEX = np.arange(len(JOINT_NAMES))
+_ALL_INDEX.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -41,15 +44,18 @@ def validate_joint_command(
     Rejects (ValueError with the reason): no names, duplicate or unknown names, a non-empty array whose
     length differs from the names', a missing required field, NaN or infinite values."""
     names = list(names)
-    if not names:
-        raise ValueError("no joint names")
-    if len(set(names)) != len(names):
-        dup = sorted({n for n in names if names.count(n) > 1})
-        raise ValueError(f"duplicate joint name(s) {dup}")
-    index = _INDEX if known is JOINT_NAMES else {n: i for i, n in enumerate(known)}
-    unknown = [n for n in names if n not in index]
-    if unknown:
-        raise ValueError(f"unknown joint name(s) {unknown[:5]}{' ...' if len(unknown) > 5 else ''}")
+    # every joint in JOINT_NAMES order (what the nodes send, 500 times a second): no name to check
+    everything = known is JOINT_NAMES and names == _ALL_NAMES
+    if not everything:
+        if not names:
+            raise ValueError("no joint names")
+        if len(set(names)) != len(names):
+            dup = sorted({n for n in names if names.count(n) > 1})
+            raise ValueError(f"duplicate joint name(s) {dup}")
+        index = _INDEX if known is JOINT_NAMES else {n: i for i, n in enumerate(known)}
+        unknown = [n for n in names if n not in index]
+        if unknown:
+            raise ValueError(f"unknown joint name(s) {unknown[:5]}{' ...' if len(unknown) > 5 else ''}")
     fields: dict[str, np.ndarray | None] = {}
     for label, values in (("position", position), ("velocity", velocity), ("effort", effort)):
         arr = np.asarray(values, dtype=float).reshape(-1)
@@ -65,7 +71,7 @@ def validate_joint_command(
         fields[label] = arr
     if fields.get(require) is None:
         raise ValueError(f"no {require} values")
-    idx = np.array([index[n] for n in names], dtype=int)
+    idx = _ALL_INDEX if everything else np.array([index[n] for n in names], dtype=int)
     return JointCommand(idx, fields["position"], fields["velocity"], fields["effort"])
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from cpg_walker.robot.hoap2 import SOLES, Hoap2Sim
+from cpg_walker.robot.hoap2 import Hoap2Sim
 
 CONTACT_ON_N = 10.0  # sole load above which a foot counts as on the ground (~15 % of the weight)
 CONTACT_OFF_N = 3.0  # ... and below which it counts as lifted (hysteresis)
@@ -51,26 +51,47 @@ class TouchdownDetector:
 
 def sole_wrenches(sim: Hoap2Sim) -> list[tuple[np.ndarray, np.ndarray]]:
     """(force N, torque N*m) the floor exerts on each sole plate (left, right), summed over its contacts,
-    expressed in the sole's frame with the torque about the sole plate's centre."""
+    expressed in the sole's frame with the torque about the sole plate's centre.
+
+    Runs every control period in sim_node, so the per-contact part is plain float arithmetic on lists read
+    once from MuJoCo's contact arrays (numpy calls on 3-vectors cost a microsecond each); MuJoCo's
+    ``mj_contactForce`` gives each contact's force in its frame. Per contact: the force rotated to the world
+    (the frame's rows are normal geom1 -> geom2, tangent 1, tangent 2: f_world = frame^T f, summed in row
+    order), negated when the sole is geom1, torque r x f about the sole centre, summed from zero in contact
+    order. test/test_ros_units.py checks the values equal the numpy computation's on a walk's contacts."""
     m, d = sim.model, sim.data
-    out = []
-    f6 = np.zeros(6)
-    for name in SOLES:
-        g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, name)
-        force, torque = np.zeros(3), np.zeros(3)
-        centre = d.geom_xpos[g]
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if c.geom1 != g and c.geom2 != g:
+    soles = sim._sole_geoms
+    con = d.contact
+    g1, g2 = con.geom1.tolist(), con.geom2.tolist()
+    sums = {g: [0.0] * 6 for g in soles}  # force x, y, z, torque x, y, z (world frame)
+    centres = {g: d.geom_xpos[g].tolist() for g in soles}
+    frames = pos = None
+    f6 = np.empty(6)
+    for i, (a, b) in enumerate(zip(g1, g2, strict=True)):
+        if a not in sums and b not in sums:
+            continue
+        if frames is None:
+            frames, pos = con.frame.tolist(), con.pos.tolist()
+        mujoco.mj_contactForce(m, d, i, f6)
+        n0, n1, n2, t0, t1, t2, u0, u1, u2 = frames[i]
+        c0, c1, c2 = f6[:3].tolist()
+        fx, fy, fz = n0 * c0 + t0 * c1 + u0 * c2, n1 * c0 + t1 * c1 + u1 * c2, n2 * c0 + t2 * c1 + u2 * c2
+        for g, sign in ((a, -1.0), (b, 1.0)):  # geom2 receives +f; geom1 (if a sole) -f
+            acc = sums.get(g)
+            if acc is None:
                 continue
-            mujoco.mj_contactForce(m, d, i, f6)
-            frame = c.frame.reshape(3, 3)  # rows: normal (geom1 -> geom2), tangent 1, tangent 2
-            fw = frame.T @ f6[:3]  # force on geom2, world frame
-            if c.geom1 == g:
-                fw = -fw
-            force += fw
-            r = c.pos - centre
-            torque += (r[1] * fw[2] - r[2] * fw[1], r[2] * fw[0] - r[0] * fw[2], r[0] * fw[1] - r[1] * fw[0])
+            wx, wy, wz = (fx, fy, fz) if sign > 0 else (-fx, -fy, -fz)
+            p, o = pos[i], centres[g]
+            rx, ry, rz = p[0] - o[0], p[1] - o[1], p[2] - o[2]
+            acc[0] += wx
+            acc[1] += wy
+            acc[2] += wz
+            acc[3] += ry * wz - rz * wy
+            acc[4] += rz * wx - rx * wz
+            acc[5] += rx * wy - ry * wx
+    out = []
+    for g in soles:
         R = d.geom_xmat[g].reshape(3, 3)
-        out.append((R.T @ force, R.T @ torque))
+        w = np.array(sums[g])
+        out.append((R.T @ w[:3], R.T @ w[3:]))
     return out
