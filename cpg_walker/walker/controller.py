@@ -430,6 +430,26 @@ class HumanoidCPG:
         qd = net.gain * np.einsum("bi,bi->b", net.alpha, self._deriv[0])
         return q, qd
 
+    def forecast(self, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(q*, q̇*) of the 10 DOFs at ``offsets`` (s ahead, non-decreasing, >= 0): what `joint_targets`
+        will give after stepping that far, predicted without changing the controller
+        (`CPGNetwork.forecast`, RK4 at up to the guard's step). The ζ/α command filters are advanced
+        with the forecast (once per interval, not per control step: exact when settled, within
+        O(interval²) of the stepped filter while a command is being reached). Two (K, 10) arrays."""
+        offsets = np.asarray(offsets, dtype=float).reshape(-1)
+        zf, af = self._zf.copy(), self._af.copy()
+        if (zf == self.zeta_command).all() and (af == self.alpha_command).all():  # settled: as applied
+            return self.net.forecast(offsets)
+        zeta, amp = np.empty(offsets.size), np.empty(offsets.size)
+        t = 0.0
+        for k, o in enumerate(offsets):
+            if o > t:
+                self._filter(zf, self.zeta_command, o - t)
+                self._filter(af, self.alpha_command, o - t)
+                t = o
+            zeta[k], amp[k] = zf[-1], af[-1]
+        return self.net.forecast(offsets, zeta=zeta, amplitude=amp)
+
     # ------------------------------------------------------------------ storage (walker/storage.py)
     def to_dict(self) -> dict:
         from cpg_walker.walker import storage
