@@ -433,22 +433,36 @@ class HumanoidCPG:
     def forecast(self, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(q*, q̇*) of the 10 DOFs at ``offsets`` (s ahead, non-decreasing, >= 0): what `joint_targets`
         will give after stepping that far, predicted without changing the controller
-        (`CPGNetwork.forecast`, RK4 at up to the guard's step). The ζ/α command filters are advanced
-        with the forecast (once per interval, not per control step: exact when settled, within
-        O(interval²) of the stepped filter while a command is being reached). Two (K, 10) arrays."""
+        (`CPGNetwork.forecast`, RK4 at up to the guard's step). While a ζ/α command is being reached the
+        filters' future is that of `step` at ``control_dt`` (exact, `_filter_path`): ζ at each interval's
+        middle, α at each point. Two (K, 10) arrays."""
         offsets = np.asarray(offsets, dtype=float).reshape(-1)
-        zf, af = self._zf.copy(), self._af.copy()
-        if (zf == self.zeta_command).all() and (af == self.alpha_command).all():  # settled: as applied
+        zc, ac = self.zeta_command, self.alpha_command
+        if (self._zf == zc).all() and (self._af == ac).all():  # settled: as applied now
             return self.net.forecast(offsets)
-        zeta, amp = np.empty(offsets.size), np.empty(offsets.size)
-        t = 0.0
-        for k, o in enumerate(offsets):
-            if o > t:
-                self._filter(zf, self.zeta_command, o - t)
-                self._filter(af, self.alpha_command, o - t)
-                t = o
-            zeta[k], amp[k] = zf[-1], af[-1]
+        h = self.settings.control_dt
+        mid = np.concatenate(([0.0], offsets[:-1])) if offsets.size else offsets
+        zeta = self._filter_path(self._zf, zc, np.rint(0.5 * (mid + offsets) / h))
+        amp = self._filter_path(self._af, ac, np.rint(offsets / h))
         return self.net.forecast(offsets, zeta=zeta, amplitude=amp)
+
+    def _filter_path(self, state: np.ndarray, command: float, steps: np.ndarray) -> np.ndarray:
+        """The output of the cascaded lags (`_filter`) after each of ``steps`` steps of control_dt, in
+        closed form: the error e = state - command evolves as e <- A e with A = d·I + L (d = e^(-dt/T),
+        L strictly lower triangular), so A^n = d^n I + n d^(n-1) L + n(n-1)/2 d^(n-2) L² (L³ = 0)."""
+        T = self.settings.modulation_time_constant
+        if T <= 0:
+            return np.full(steps.shape, command)
+        d = math.exp(-self.settings.control_dt / T)
+        c = 1.0 - d
+        L = np.array([[0.0, 0.0, 0.0], [c * d, 0.0, 0.0], [c * c * d, c * d, 0.0]])
+        e = state - command
+        Le, L2e = L @ e, L @ (L @ e)
+        n = np.asarray(steps, dtype=float)
+        dn = d ** n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = dn * e[2] + n * dn / d * Le[2] + 0.5 * n * (n - 1) * dn / (d * d) * L2e[2]
+        return command + out
 
     # ------------------------------------------------------------------ storage (walker/storage.py)
     def to_dict(self) -> dict:

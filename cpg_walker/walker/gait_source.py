@@ -112,8 +112,15 @@ class CPGGaitSource:
             q[k], qd[k] = self.playback.targets(float(times[k]))
         if cpg.any():
             qc, qdc = self.ctrl.forecast(np.maximum(times[cpg] - self._t_net, 0.0))
-            for j, k in enumerate(np.flatnonzero(cpg)):
-                q[k], qd[k] = self._compose(float(times[k]), qc[j], qdc[j])
+            rows = np.flatnonzero(cpg)
+            u = (times[rows] - self.handover) / self.blend if self.blend > 0 else np.ones(rows.size)
+            done = u >= 1.0  # past the cross-fade (what _compose gives, for all these points at once)
+            q[rows[done]] = self.hold
+            q[np.ix_(rows[done], self._idx)] = qc[done]
+            qd[rows[done]] = 0.0
+            qd[np.ix_(rows[done], self._idx)] = qdc[done]
+            for j in np.flatnonzero(~done):
+                q[rows[j]], qd[rows[j]] = self._compose(float(times[rows[j]]), qc[j], qdc[j])
         return q, qd
 
     def _compose(self, t: float, qc: np.ndarray, qdc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
