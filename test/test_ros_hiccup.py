@@ -33,7 +33,7 @@ def _sim_time(probe) -> float:
     return max(stamps, default=0.0)
 
 
-def _wait_sim(probe, graph, t: float, timeout: float = 180.0) -> float:
+def _wait_sim(probe, graph, t: float, timeout: float = 300.0) -> float:
     """Spin until the sim time reaches t (or the sim exits); the sim time then."""
     sim = graph.procs["sim_node"].popen
     probe.spin_for(timeout, until=lambda: _sim_time(probe) >= t or sim.poll() is not None)
@@ -60,7 +60,8 @@ def _start_walk(graph, probe, duration: float, record) -> None:
     probe.listen("/diagnostics", DiagnosticArray, 200)
     graph.start("pid_node", wait_for_targets=True)
     cpg = graph.start("cpg_node")
-    assert probe.spin_for(60.0, until=lambda: probe.node.count_publishers("/joint_trajectory") > 0), cpg.log()
+    up = lambda: probe.node.count_publishers("/joint_trajectory") > 0  # noqa: E731
+    assert probe.spin_for(120.0, until=up), cpg.log()
     graph.start("sim_node", pacing="realtime", duration=duration, record_path=str(record))
 
 
@@ -69,7 +70,7 @@ def _finish(graph, record, duration: float):
     from cpg_walker.experiments.replay_graph import record_to_result
     from cpg_walker.robot.run_record import RunRecord
 
-    assert graph.wait("sim_node", timeout=60.0 + 10.0 * duration) == 0, graph.procs["sim_node"].log()[-2000:]
+    assert graph.wait("sim_node", timeout=120.0 + 20.0 * duration) == 0, graph.procs["sim_node"].log()[-2000:]
     graph.stop_all()
     stats = {}
     for name, proc in graph.procs.items():
@@ -129,7 +130,7 @@ def test_the_robot_walks_with_an_echo_and_a_subscriber_to_every_topic(graph, pro
                         message_class(types[0]), topic,
                         lambda _m, t=topic: counts.__setitem__(t, counts[t] + 1), 10)
         sim = graph.procs["sim_node"].popen
-        probe.spin_for(60.0 + 10.0 * duration, until=lambda: sim.poll() is not None)
+        probe.spin_for(120.0 + 20.0 * duration, until=lambda: sim.poll() is not None)
         run, sim_stats, _ = _finish(graph, record, duration)
     finally:
         if echo.poll() is None:

@@ -6,7 +6,9 @@ period's target, exactly like target_player_node, so lockstep runs stay determin
 are the oscillators' modulation commands (HumanoidCPG's smoothed ζ/α), never a scaling of the output.
 Every ``horizon_step`` of sim time it also publishes the next ``horizon`` seconds of targets as
 ``/joint_trajectory`` (``CPGGaitSource.forecast``: the CPG stepped ahead on a copy of its state), which
-pid_node follows when the live targets are late; the live targets are unaffected by it.
+pid_node follows when the live targets are late; the live targets are unaffected by it. Its points are
+at every tick until the next message is due (a target late by a few ticks is then on a point: what the
+tick would have sent), then every ``horizon_step``.
 """
 
 from __future__ import annotations
@@ -56,7 +58,8 @@ publishes:
     oscillators' [phase rad, frequency Hz (with zeta), amplitude rad (gain*alpha)], row N is the DOF's
     output [target q rad, target qd rad/s, offset rad]
   /joint_trajectory (trajectory_msgs/JointTrajectory, every horizon_step of sim time): the targets of
-    all 25 joints (positions, velocities) at stamp + 0, horizon_step, ..., horizon (the forecast)
+    all 25 joints (positions, velocities) at stamp + every tick period up to horizon_step, then
+    every horizon_step up to horizon (the forecast)
   /diagnostics (diagnostic_msgs/DiagnosticArray, every monitor_period): status 'cpg_walker/cpg' with
     state (learning | converged | starting | walking), zeta, alpha (commanded and applied), N, overruns
 parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N when learning; 0 = the
@@ -120,7 +123,8 @@ class CPGNode(Node):
         n_points = round(horizon * 1e9 / self.horizon_step_ns)
         if horizon > 0 and n_points < 1:
             raise ValueError(f"horizon ({horizon} s) must be 0 or at least horizon_step")
-        self.horizon_ns = np.arange(n_points + 1, dtype=np.int64) * self.horizon_step_ns if horizon > 0 \
+        # the coarse points (step to horizon); the tick-spaced head is added once the tick period is known
+        self.horizon_ns = np.arange(1, n_points + 1, dtype=np.int64) * self.horizon_step_ns if horizon > 0 \
             else None
         for name, value in (("zeta", zeta), ("alpha", alpha)):
             reason = modulation_error(name, value)
@@ -145,8 +149,10 @@ class CPGNode(Node):
         self.builder = JointStateBuilder(self.source.names)
         self.next_horizon_ns = 0
         self.horizon_work: list[float] = []
-        self.traj_builder = None if self.horizon_ns is None else JointTrajectoryBuilder(
-            self.source.names, self.horizon_ns.tolist())
+        self.traj_builder: JointTrajectoryBuilder | None = None
+        self.traj_offsets_ns: np.ndarray | None = None
+        self.traj_period_ns: int | None = None
+        self.tick_ns: int | None = None  # the smallest step seen between /clock ticks
         self.state_msg = Float64MultiArray(layout=state_layout(self.ctrl.names, self.ctrl.net.N))
         self.activity = ActivityStats()
         self.hot = HotPath(self, [self.create_subscription(Clock, "/clock", self._on_clock, 100)])
@@ -175,9 +181,10 @@ class CPGNode(Node):
             spare.step(self.source.h)
             spare.joint_targets()
         if self.horizon_ns is not None:  # the forecast with the filters moving, then settled
-            spare.forecast(self.horizon_ns / 1e9)
+            offsets = np.concatenate(([0.0, self.source.h], self.horizon_ns / 1e9))
+            spare.forecast(offsets)
             spare.set_modulation_state(spare.zeta_command, spare.alpha_command)
-            spare.forecast(self.horizon_ns / 1e9)
+            spare.forecast(offsets)
         state_vector(spare)
         self.get_logger().info(f"CPG warmed up in {time.perf_counter() - t0:.3f} s")
 
@@ -218,8 +225,10 @@ class CPGNode(Node):
             if self.lookahead:
                 self._publish(t_ns + period)
         self.last_tick_ns = t_ns
-        if self.traj_builder is not None and t_ns >= self.next_horizon_ns:
-            self._publish_horizon(self.sent_ns)
+        if period is not None and (self.tick_ns is None or period < self.tick_ns):
+            self.tick_ns = period  # the sim's control period (a skipped tick only gives a multiple)
+        if self.horizon_ns is not None and self.tick_ns is not None and t_ns >= self.next_horizon_ns:
+            self._publish_horizon(self.sent_ns, self.tick_ns)
             self.next_horizon_ns = t_ns + self.horizon_step_ns
         if t_ns >= self.next_monitor_ns:
             self.stage = "walking" if t_ns >= self.walk_from_s * 1e9 else "starting"
@@ -238,10 +247,16 @@ class CPGNode(Node):
         self.pub.publish(self.builder.fill(t_ns, position=q, velocity=qd))
         self.sent_ns = t_ns
 
-    def _publish_horizon(self, t_ns: int) -> None:
-        """/joint_trajectory: the targets at t_ns + horizon_ns (t_ns: the newest target sent)."""
+    def _publish_horizon(self, t_ns: int, period_ns: int) -> None:
+        """/joint_trajectory from t_ns (the newest target sent): points every tick period up to
+        horizon_step, then every horizon_step to horizon."""
         w0 = time.perf_counter()
-        q, qd = self.source.forecast((t_ns + self.horizon_ns) / 1e9)
+        if period_ns != self.traj_period_ns:  # the first message (or a shorter period seen since)
+            head = np.arange(0, self.horizon_step_ns, period_ns, dtype=np.int64)
+            self.traj_offsets_ns = np.concatenate((head, self.horizon_ns))
+            self.traj_builder = JointTrajectoryBuilder(self.source.names, self.traj_offsets_ns.tolist())
+            self.traj_period_ns = period_ns
+        q, qd = self.source.forecast((t_ns + self.traj_offsets_ns) / 1e9)
         self.traj_pub.publish(self.traj_builder.fill(t_ns, q, qd))
         if len(self.horizon_work) < 100_000:
             self.horizon_work.append(time.perf_counter() - w0)

@@ -50,8 +50,9 @@ parameters: kp.<group>, ki.<group>, kd.<group> for group in leg, arm, body, head
 
 #: Upper ends of the gains' ranges (N*m/rad, N*m/(rad*s), N*m*s/rad): far above any stable HOAP-2 gain.
 GAIN_RANGES = {"kp": 2000.0, "ki": 2000.0, "kd": 200.0}
-#: Lockstep: stamps of early targets kept; past the limit the oldest half is dropped (a sim that far
-#: behind its controller has restarted).
+#: Targets kept by stamp until the state of their stamp applies them (lockstep: waits for them; otherwise
+#: every one stamped up to the state's stamp is applied); past the limit the oldest half is dropped (a
+#: sim that far behind its controller has restarted).
 TARGETS_KEEP = 512
 
 class PidNode(Node):
@@ -94,7 +95,7 @@ class PidNode(Node):
         self.v_target = np.zeros(len(JOINT_NAMES))
         self.targets_by_stamp: dict[int, object] = {}
         self.last_target_ns: int | None = None  # sim time of the last accepted target
-        self.newest_target_ns: int | None = None  # newest stamp among the accepted targets
+        self.live_ns: int | None = None  # outside lockstep: the newest stamp among the applied targets
         self.bridge = GapBridge(default_standing_posture(), safe_blend, resume_blend)
         self.gap = {"horizon_entries": 0, "horizon_states": 0, "safe_entries": 0, "safe_states": 0,
                     "longest_gap_s": 0.0}
@@ -163,12 +164,12 @@ class PidNode(Node):
             self.throttle.warn(self, reason_key(exc),
                                f"rejected /joint_targets: {exc}")
             return
+        t = stamp_ns(msg)
+        self.targets_by_stamp.setdefault(t, []).append(cmd)  # applied by the state of its stamp (_answer)
+        if len(self.targets_by_stamp) > TARGETS_KEEP:
+            for key in sorted(self.targets_by_stamp)[:TARGETS_KEEP // 2]:
+                del self.targets_by_stamp[key]
         if self.lockstep:
-            t = stamp_ns(msg)
-            self.targets_by_stamp.setdefault(t, []).append(cmd)
-            if len(self.targets_by_stamp) > 512:
-                for key in sorted(self.targets_by_stamp)[:256]:
-                    del self.targets_by_stamp[key]
             if self.tripped and t >= self.latest_state_ns:
                 self._untrip()
             if self.pending is not None and self.pending[0] in self.targets_by_stamp:
@@ -176,11 +177,7 @@ class PidNode(Node):
                 self.pending = None
                 self._answer(t_ns, q, v)
         else:
-            self._apply(cmd)
             self.last_target_ns = self.latest_state_ns
-            t = stamp_ns(msg)
-            if self.newest_target_ns is None or t > self.newest_target_ns:
-                self.newest_target_ns = t
             if self.tripped:
                 self._untrip()
             if self.pending is not None:
@@ -260,6 +257,14 @@ class PidNode(Node):
                 self.last_target_ns = t_ns
             for key in [k for k in self.targets_by_stamp if k < t_ns]:
                 del self.targets_by_stamp[key]
+        else:  # every target stamped up to t, in stamp order (one sent ahead waits for its state)
+            due = [k for k in self.targets_by_stamp if k <= t_ns]
+            if not due and self.live_ns is None and self.targets_by_stamp:
+                due = [min(self.targets_by_stamp)]  # start-up: the first target, whatever its stamp
+            for key in sorted(due):
+                for cmd in self.targets_by_stamp.pop(key):
+                    self._apply(cmd)
+                self.live_ns = key if self.live_ns is None else max(self.live_ns, key)
         q_ref, v_ref = self.q_target, self.v_target
         if not self.lockstep and self.bridge.active:
             q_ref, v_ref = self._bridge(t_ns)
@@ -279,8 +284,8 @@ class PidNode(Node):
         """The reference at t from the GapBridge (live targets, horizon or standing crouch); logs and
         counts the gaps (a gap shorter than target_timeout is not logged: the horizon rides it out)."""
         b = self.bridge
-        q_ref, v_ref = b.reference(t_ns, self.q_target, self.v_target, self.newest_target_ns)
-        gap_s = 0.0 if self.newest_target_ns is None else (t_ns - self.newest_target_ns) / 1e9
+        q_ref, v_ref = b.reference(t_ns, self.q_target, self.v_target, self.live_ns)
+        gap_s = 0.0 if self.live_ns is None else (t_ns - self.live_ns) / 1e9
         g = self.gap
         if b.switched is not None:
             came_from, mode = b.switched

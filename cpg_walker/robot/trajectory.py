@@ -123,10 +123,10 @@ class GapBridge:
         any). Returns the live arrays themselves while LIVE and not blending.
 
         A switch compares the sources at the same instant t: the live target, stamped ``live_ns``, is
-        carried to t along its velocity for that comparison (a live target one period old is the same
-        signal as the horizon at t, not an offset to blend away), so going onto and off the horizon
-        blends only the forecast's error, and only a real difference (the standing posture) is blended
-        over the set time."""
+        carried to t for that comparison (`_source`; a live target one period old is the same signal
+        as the horizon at t, not an offset to blend away), so going onto and off the horizon blends only
+        the forecast's error, and only a real difference (the standing posture) is blended over the set
+        time."""
         self.switched = None
         if live_ns is not None and live_ns >= t_ns:
             want = LIVE
@@ -152,10 +152,18 @@ class GapBridge:
         return self._output(self.mode, t_ns, live, at_t=False)
 
     def _source(self, mode: str, t_ns: int, live: tuple, at_t: bool) -> tuple[np.ndarray, np.ndarray]:
-        """The source's (q, q̇) at t; ``at_t``: the live targets carried from their stamp to t."""
+        """The source's (q, q̇) at t; ``at_t``: the live targets carried from their stamp to t, along
+        the newest horizon where it covers both instants (what the signal does in between), else along
+        their velocity."""
         live_q, live_v, live_ns = live
         if at_t and live_ns != t_ns:
             live_q = live_q + live_v * ((t_ns - live_ns) * 1e-9)
+            traj = self.newest
+            if traj is not None and traj.covers(live_ns) and traj.covers(t_ns):
+                (q1, v1), (q0, v0) = traj.sample(t_ns), traj.sample(live_ns)
+                live_q, live_v = live_q.copy(), live_v.copy()
+                live_q[traj.index] = live[0][traj.index] + (q1 - q0)
+                live_v[traj.index] = live_v[traj.index] + (v1 - v0)
         if mode == SAFE:
             return self.safe_q, np.zeros_like(self.safe_q)
         if mode == HORIZON and self.trajectory is not None:
