@@ -215,3 +215,18 @@ def playback_derivative(s3, ref2, rho2, phi2, om2, k2d, gamma, gmu, gts, has_g, 
     theta = np.empty(M)
     _playback_rhs(s3.reshape(5, M), ref2.reshape(M), rho2.reshape(M), phi2.reshape(M), om2.reshape(M),
                   k2d.reshape(M), gamma, gmu, gts, has_g, theta, out3.reshape(2, M))
+
+
+@_jit
+def playback_forecast(s3, hs, nsub, oms, ref2, rho2, phi2, k2d, gamma, gmu, gts, has_g, work, xs, dxs):
+    """`CPGNetwork.forecast` in one call: for each point p, `nsub[p]` RK4 steps of `hs[p]` of the frozen
+    network's x, y with the ζ·ω coefficients `oms[p]` (B, N), in place on the copy `s3`, then x into
+    `xs[p]` and dx/dt into `dxs[p]` (each (B, N)) — `playback_step` and `playback_derivative` in a loop."""
+    B, N = s3.shape[1], s3.shape[2]
+    der = np.empty((2, B, N))
+    for p in range(hs.shape[0]):
+        for _ in range(nsub[p]):
+            playback_step(s3, hs[p], ref2, rho2, phi2, oms[p], k2d, gamma, gmu, gts, has_g, work)
+        playback_derivative(s3, ref2, rho2, phi2, oms[p], k2d, gamma, gmu, gts, has_g, der)
+        xs[p] = s3[0]
+        dxs[p] = der[0]

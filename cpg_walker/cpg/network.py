@@ -455,10 +455,12 @@ class CPGNetwork:
         if self._scaled_h:
             out *= self._ts3
 
-    def playback_rhs(self, s: np.ndarray, _u: object, out: np.ndarray) -> None:
+    def playback_rhs(self, s: np.ndarray, om: np.ndarray | None, out: np.ndarray) -> None:
         """d[x, y]/dt of the frozen network (F = 0; ω, α, φ constant): eqs 4, 5 (+16, 17) with ζ·ω.
 
-        Coefficients precomputed by `_prepare_playback` (time scale folded in)."""
+        Coefficients precomputed by `_prepare_playback` (time scale folded in); ``om`` (B, N): other
+        ζ·ω coefficients (time scale folded in) than the applied ones (`forecast`), None = those."""
+        om = self._om_play if om is None else om
         x, y = s
         r2 = x * x + y * y
         radial = self._gmu - self._gamma * r2
@@ -466,22 +468,93 @@ class CPGNetwork:
         theta_ref *= self._rho
         theta_ref -= self._phi_play
         np.multiply(s, radial, out=out)
-        out[0] -= self._om_play * y
+        out[0] -= om * y
         out[0] += self._k_play * np.sin(theta_ref)  # (4)/(12)
-        out[1] += self._om_play * x  # (5)
+        out[1] += om * x  # (5)
         if self._g is not None:  # (16), (17)
             out += s * ((self._g[:, None] * self._ts_play) / np.maximum(np.sqrt(r2), R_FLOOR))
 
-    def playback_derivative(self, out: np.ndarray) -> None:
+    def playback_derivative(self, out: np.ndarray, state: np.ndarray | None = None,
+                            om: np.ndarray | None = None) -> None:
         """d[x, y]/dt of the frozen network at its state (and the `feedback` of the last step) into `out`
-        (2, B, N): `playback_rhs`, by the compiled kernel when `uses_numba` (same expressions)."""
+        (2, B, N): `playback_rhs`, by the compiled kernel when `uses_numba` (same expressions).
+        ``state`` (5, B, N) and ``om`` (as in `playback_rhs`): another state and ζ·ω than the network's
+        (`forecast`)."""
         kern, g = self._kern, self._g
+        s = self._s if state is None else state
         if kern is None:
-            self.playback_rhs(self._s[:2], None, out)
+            self.playback_rhs(s[:2], om, out)
         else:
-            kern.playback_derivative(self._s, self._ref, self._rho, self._phi_play, self._om_play,
-                                     self._k_play, self._pb_gamma, self._pb_gmu,
-                                     self._g_none if g is None else g * self._pb_ts, g is not None, out)
+            kern.playback_derivative(s, self._ref, self._rho, self._phi_play,
+                                     self._om_play if om is None else om, self._k_play, self._pb_gamma,
+                                     self._pb_gmu, self._g_none if g is None else g * self._pb_ts,
+                                     g is not None, out)
+
+    def forecast(self, offsets: np.ndarray, zeta: np.ndarray | None = None,
+                 amplitude: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The frozen network's future output Q_b (eq 11) and its time derivative at ``offsets`` (physical
+        s ahead, non-decreasing, >= 0), from a copy of x, y stepped with RK4 (eqs 4, 5, 12 with ζ·ω; the
+        feedback g of the last step held): the future the network will have, up to the step size.
+        Intervals are split so that each step respects `check_step`'s guard (coarser than a control
+        period: the RK4 error over the horizon stays ~1e-5 rad at 20 ms steps). The network itself is
+        not changed. ``zeta``: (K,) or (K, B) ζ over the interval ending at each offset (None: ζ as
+        applied now); ``amplitude``: (K,) or (K, B) amplitude scale s_b of α = s_b·α_learned at each
+        offset (None: α as now). Returns two (K, B) arrays. Not for networks with non-harmonic
+        oscillators (their φ wrap correction is not replayed)."""
+        self._require_frozen("forecast")
+        if self._wrap_idx is not None:
+            raise ValueError("forecast: networks with non-harmonic oscillators are not supported")
+        offsets = np.asarray(offsets, dtype=float).reshape(-1)
+        K, B = offsets.size, self.B
+        if K == 0 or not np.all(np.isfinite(offsets)) or offsets[0] < 0 or np.any(np.diff(offsets) < 0):
+            raise ValueError("forecast offsets must be finite, >= 0 and non-decreasing (at least one)")
+
+        def per_point(values: np.ndarray | None, name: str) -> np.ndarray | None:
+            if values is None:
+                return None
+            arr = np.asarray(values, dtype=float)
+            arr = arr.reshape(-1, 1) if arr.ndim == 1 else arr
+            if arr.shape not in ((K, 1), (K, B)) or not np.all(np.isfinite(arr)):
+                raise ValueError(f"forecast {name}: expected {K} finite values, or {K} x {B}")
+            return np.broadcast_to(arr, (K, B))
+
+        zeta_k, amp_k = per_point(zeta, "zeta"), per_point(amplitude, "amplitude")
+        zeta_max = np.abs(self._zeta[None] if zeta_k is None else zeta_k).max(axis=0)  # (B,)
+        h_max = MAX_RATE_STEP / fastest_rate(self.params, self._s[2] * zeta_max[:, None], self.time_scale)
+        s = self._s.copy()
+        gaps = np.diff(offsets, prepend=0.0)
+        nsub = np.where(gaps > 0, np.maximum(1, np.ceil(gaps / h_max)), 0).astype(np.int64)
+        hs = gaps / np.maximum(nsub, 1)
+        oms = np.empty((K, B, self.N))  # the ζ·ω coefficients over the interval ending at each point
+        if zeta_k is None:
+            oms[:] = self._om_play
+        else:
+            oms[:] = self._s[2][None] * zeta_k[:, :, None]
+            if self._scaled_h:
+                oms *= self.time_scale[None, :, None]
+        x = np.empty((K, B, self.N))  # x and ẋ at each offset
+        xd = np.empty((K, B, self.N))
+        g = self._g
+        if self._kern is not None:  # one compiled call (a Python loop of kernel calls costs ~8x more)
+            gts = self._g_none if g is None else g * self._pb_ts
+            self._kern.playback_forecast(s, hs, nsub, oms, self._ref, self._rho, self._phi_play, self._k_play,
+                                         self._pb_gamma, self._pb_gmu, gts, g is not None,
+                                         np.empty_like(self._work), x, xd)
+        else:
+            rk = RK4((2, B, self.N))
+            deriv = np.empty((2, B, self.N))
+            for k in range(K):
+                for _ in range(nsub[k]):
+                    rk.step(self.playback_rhs, s[:2], hs[k], oms[k], oms[k], oms[k])
+                self.playback_derivative(deriv, s, oms[k])
+                x[k], xd[k] = s[0], deriv[0]
+        if amp_k is None:
+            alpha = np.broadcast_to(s[3], x.shape)
+        else:
+            alpha = self._alpha_learned[None] * amp_k[:, :, None]
+        q = self.offset + self.gain * np.einsum("kbi,kbi->kb", alpha, x)
+        qd = self.gain * np.einsum("kbi,kbi->kb", alpha, xd)
+        return q, qd
 
     # ---------------------------------------------------------------- learning / playback switches
     def freeze(self) -> None:

@@ -4,6 +4,11 @@ Thin wiring around ``cpg.humanoid.CPGGaitSource``: on every ``/clock`` tick it a
 tick's sim time and publishes ``/joint_targets`` stamped with it, and (``lookahead``) also the next
 period's target, exactly like target_player_node, so lockstep runs stay deterministic. ``zeta``/``alpha``
 are the oscillators' modulation commands (HumanoidCPG's smoothed ζ/α), never a scaling of the output.
+Every ``horizon_step`` of sim time it also publishes the next ``horizon`` seconds of targets as
+``/joint_trajectory`` (``CPGGaitSource.forecast``: the CPG stepped ahead on a copy of its state), which
+pid_node follows when the live targets are late; the live targets are unaffected by it. Its points are
+at every tick until the next message is due (a target late by a few ticks is then on a point: what the
+tick would have sent), then every ``horizon_step``.
 """
 
 from __future__ import annotations
@@ -19,8 +24,9 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+from trajectory_msgs.msg import JointTrajectory
 
-from cpg_walker.nodes.messages import JointStateBuilder, darray, stamp
+from cpg_walker.nodes.messages import JointStateBuilder, JointTrajectoryBuilder, darray, stamp
 from cpg_walker.nodes.runtime import (
     ActivityStats,
     HotPath,
@@ -32,6 +38,7 @@ from cpg_walker.nodes.runtime import (
     float_param,
     gc_summary,
     int_param,
+    latency_summary,
     parse_cli,
     run_main,
     str_param,
@@ -52,11 +59,15 @@ publishes:
     [dof (10, names in the dof label), oscillator (N + 1), value (3)]; rows 0..N-1 of a DOF are its
     oscillators' [phase rad, frequency Hz (with zeta), amplitude rad (gain*alpha)], row N is the DOF's
     output [target q rad, target qd rad/s, offset rad]
+  /joint_trajectory (trajectory_msgs/JointTrajectory, every horizon_step of sim time): the targets of
+    all 25 joints (positions, velocities) at stamp + every tick period up to horizon_step, then
+    every horizon_step up to horizon (the forecast)
   /diagnostics (diagnostic_msgs/DiagnosticArray, every monitor_period): status 'cpg_walker/cpg' with
     state (learning | converged | starting | walking), zeta, alpha (commanded and applied), N, overruns
 parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N when learning; 0 = the
   learning settings'), zeta [-2, 2] and alpha [0, 2] (settable at run time), lookahead, monitor_period
-  (sim s), realtime_priority, nice, cpu_affinity (OS scheduling)"""
+  (sim s), horizon and horizon_step (sim s; horizon 0 = no /joint_trajectory), realtime_priority, nice,
+  cpu_affinity (OS scheduling)"""
 
 #: The start-up warm-up commands this fraction of the current zeta/alpha (0.9 of 0 is 0: then this value
 #: itself), so the modulation filters move too while the compiled kernels load.
@@ -107,6 +118,18 @@ class CPGNode(Node):
         self.monitor_ns = round(declare(self, "monitor_period", float_param(
             "sim s between /cpg/state and /diagnostics messages", 0.002, 60.0, read_only=True)) * 1e9)
         self.scheduling = declare_scheduling(self)  # applied once started (runtime.settle_process)
+        horizon = declare(self, "horizon", float_param(
+            "sim s of future targets in each /joint_trajectory (0 = none published)", 0.0, 5.0,
+            read_only=True))
+        self.horizon_step_ns = round(declare(self, "horizon_step", float_param(
+            "sim s between /joint_trajectory points and between messages", 0.002, 1.0,
+            read_only=True)) * 1e9)
+        n_points = round(horizon * 1e9 / self.horizon_step_ns)
+        if horizon > 0 and n_points < 1:
+            raise ValueError(f"horizon ({horizon} s) must be 0 or at least horizon_step")
+        # the coarse points (step to horizon); the tick-spaced head is added once the tick period is known
+        self.horizon_ns = np.arange(1, n_points + 1, dtype=np.int64) * self.horizon_step_ns if horizon > 0 \
+            else None
         for name, value in (("zeta", zeta), ("alpha", alpha)):
             reason = modulation_error(name, value)
             if reason:
@@ -114,6 +137,7 @@ class CPGNode(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.state_pub = self.create_publisher(Float64MultiArray, "/cpg/state", 10)
         self.pub = self.create_publisher(JointState, "/joint_targets", 10)
+        self.traj_pub = self.create_publisher(JointTrajectory, "/joint_trajectory", 5)
         self.timing = TickStats()
         self.stage = "learning"
         self.ctrl, self.origin, self.converged = self._controller(cpg_file, n_osc or None)
@@ -127,6 +151,12 @@ class CPGNode(Node):
         self.sent_ns: int | None = None
         self.recent: dict[int, tuple] = {}  # last published targets by stamp (re-sent ticks)
         self.builder = JointStateBuilder(self.source.names, fields=("position", "velocity"))
+        self.next_horizon_ns = 0
+        self.horizon_work: list[float] = []
+        self.traj_builder: JointTrajectoryBuilder | None = None
+        self.traj_offsets_ns: np.ndarray | None = None
+        self.traj_period_ns: int | None = None
+        self.tick_ns: int | None = None  # the smallest step seen between /clock ticks
         self.state_msg = Float64MultiArray(layout=state_layout(self.ctrl.names, self.ctrl.net.N))
         self.activity = ActivityStats()
         self.monitor_due: tuple[int, np.ndarray] | None = None
@@ -156,6 +186,11 @@ class CPGNode(Node):
         for _ in range(3):
             spare.step(self.source.h)
             spare.joint_targets()
+        if self.horizon_ns is not None:  # the forecast with the filters moving, then settled
+            offsets = np.concatenate(([0.0, self.source.h], self.horizon_ns / 1e9))
+            spare.forecast(offsets)
+            spare.set_modulation_state(spare.zeta_command, spare.alpha_command)
+            spare.forecast(offsets)
         state_vector(spare)
         self.get_logger().info(f"CPG warmed up in {time.perf_counter() - t0:.3f} s")
 
@@ -196,6 +231,11 @@ class CPGNode(Node):
             if self.lookahead:
                 self._publish(t_ns + period)
         self.last_tick_ns = t_ns
+        if period is not None and (self.tick_ns is None or period < self.tick_ns):
+            self.tick_ns = period  # the sim's control period (a skipped tick only gives a multiple)
+        if self.horizon_ns is not None and self.tick_ns is not None and t_ns >= self.next_horizon_ns:
+            self._publish_horizon(self.sent_ns, self.tick_ns)
+            self.next_horizon_ns = t_ns + self.horizon_step_ns
         if t_ns >= self.next_monitor_ns:
             self.stage = "walking" if t_ns >= self.walk_from_s * 1e9 else "starting"
             self._monitor(t_ns)
@@ -212,6 +252,20 @@ class CPGNode(Node):
         q, qd = cached
         self.pub.publish(self.builder.fill(t_ns, position=q, velocity=qd))
         self.sent_ns = t_ns
+
+    def _publish_horizon(self, t_ns: int, period_ns: int) -> None:
+        """/joint_trajectory from t_ns (the newest target sent): points every tick period up to
+        horizon_step, then every horizon_step to horizon."""
+        w0 = time.perf_counter()
+        if period_ns != self.traj_period_ns:  # the first message (or a shorter period seen since)
+            head = np.arange(0, self.horizon_step_ns, period_ns, dtype=np.int64)
+            self.traj_offsets_ns = np.concatenate((head, self.horizon_ns))
+            self.traj_builder = JointTrajectoryBuilder(self.source.names, self.traj_offsets_ns.tolist())
+            self.traj_period_ns = period_ns
+        q, qd = self.source.forecast((t_ns + self.traj_offsets_ns) / 1e9)
+        self.traj_pub.publish(self.traj_builder.fill(t_ns, q, qd))
+        if len(self.horizon_work) < 100_000:
+            self.horizon_work.append(time.perf_counter() - w0)
 
     # ---------------------------------------------------------------- monitoring
     def _monitor(self, t_ns: int) -> None:
@@ -251,7 +305,8 @@ class CPGNode(Node):
     def on_exit(self) -> None:
         timing = self.timing.summary()
         exit_log(self, "stats " + json.dumps({**self.activity.summary(), "overruns": timing["overruns"],
-                                              "tick": timing, "gc": gc_summary(self)}))
+                                              "tick": timing, "gc": gc_summary(self),
+                                              "horizon_work": latency_summary(self.horizon_work)}))
 
 
 

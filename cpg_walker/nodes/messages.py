@@ -21,8 +21,16 @@ from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from cpg_walker.nodes.validation import JointCommand, from_ns, to_ns, validate_joint_command
+from cpg_walker.nodes.validation import (
+    JointCommand,
+    from_ns,
+    to_ns,
+    validate_joint_command,
+    validate_joint_trajectory,
+)
+from cpg_walker.robot.trajectory import Trajectory
 
 #: Marker stamp (sec, nanosec) and the marker doubles' base: values no message field holds by chance.
 _MARK_SEC, _MARK_NSEC = 0x5EC05EC0, 0x0DD5EED5
@@ -100,6 +108,39 @@ class _Serialized:
 def _with_mark_stamp(msg):
     msg.header.stamp.sec, msg.header.stamp.nanosec = _MARK_SEC, _MARK_NSEC
     return msg
+
+
+def read_joint_trajectory(msg: JointTrajectory) -> Trajectory:
+    """Validate a JointTrajectory as a horizon of future targets (validation.validate_joint_trajectory):
+    point i is at the header stamp + its time_from_start."""
+    pts = msg.points
+    return validate_joint_trajectory(
+        msg.joint_names, stamp_ns(msg),
+        [to_ns(p.time_from_start.sec, p.time_from_start.nanosec) for p in pts],
+        [p.positions for p in pts], [p.velocities for p in pts])
+
+
+class JointTrajectoryBuilder:
+    """A JointTrajectory over fixed ``names`` and point times ``offsets_ns`` after its stamp; ``fill``
+    sets the stamp and every point's positions and velocities ((K, J) arrays)."""
+
+    def __init__(self, names: Sequence[str], offsets_ns: Sequence[int]):
+        self.msg = JointTrajectory()
+        self.msg.joint_names = list(names)
+        points = []
+        for off in offsets_ns:
+            pt = JointTrajectoryPoint()
+            pt.time_from_start.sec, pt.time_from_start.nanosec = from_ns(off)
+            points.append(pt)
+        self.msg.points = points
+        self.points = self.msg.points
+
+    def fill(self, ns: int, positions: np.ndarray, velocities: np.ndarray) -> JointTrajectory:
+        self.msg.header.stamp.sec, self.msg.header.stamp.nanosec = from_ns(ns)
+        for pt, q, qd in zip(self.points, positions, velocities, strict=True):
+            pt.positions = darray(q)
+            pt.velocities = darray(qd)
+        return self.msg
 
 
 class JointStateBuilder:

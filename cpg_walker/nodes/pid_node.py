@@ -2,7 +2,9 @@
 
 Answers every ``/joint_states`` sample with ``/joint_torques`` stamped like the sample, from the PID law
 (cpg_walker.robot.pid.PidLaw) towards the latest ``/joint_targets``. Its gains and limits are ROS parameters
-(values: config/pid.yaml via ``--params-file``, the file the in-process loop reads too). See
+(values: config/pid.yaml via ``--params-file``, the file the in-process loop reads too). Outside lockstep,
+when the state is newer than the newest target, it follows the source's ``/joint_trajectory`` horizon and,
+past its end, blends to the standing crouch (cpg_walker.robot.trajectory.GapBridge). See
 docs/ROS_INTERFACE.md.
 """
 
@@ -15,8 +17,9 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
 
-from cpg_walker.nodes.messages import JointStateBuilder, read_joint_command, stamp_ns
+from cpg_walker.nodes.messages import JointStateBuilder, read_joint_command, read_joint_trajectory, stamp_ns
 from cpg_walker.nodes.runtime import (
     ActivityStats,
     HotPath,
@@ -35,20 +38,23 @@ from cpg_walker.nodes.validation import check_finite_scalar, reason_key
 from cpg_walker.robot.hoap2 import default_standing_posture
 from cpg_walker.robot.joints import GROUPS, JOINT_NAMES, MAX_TORQUE_NM
 from cpg_walker.robot.pid import GAINS, LIMITS, PidLaw, gain_owner
+from cpg_walker.robot.trajectory import HORIZON, LIVE, SAFE, GapBridge
 
 INTERFACE = """\
 subscribes: /joint_targets (sensor_msgs/JointState: position, optional velocity, any subset of joints by
-  name), /joint_states (sensor_msgs/JointState)
+  name), /joint_states (sensor_msgs/JointState), /joint_trajectory (trajectory_msgs/JointTrajectory: the
+  source's horizon of future targets, followed when the targets are late; not in lockstep)
 publishes: /joint_torques (sensor_msgs/JointState: name + effort N*m, stamp = the answered state's)
 parameters: kp.<group>, ki.<group>, kd.<group> for group in leg, arm, body, head (and kp.<joint> ... for
   per-joint overrides given at start-up), max_torque, integral_limit, max_velocity (settable, validated);
-  target_timeout (sim s), lockstep, wait_for_targets, target_wait and startup_wait (wall s);
-  realtime_priority, nice, cpu_affinity (OS scheduling)"""
+  target_timeout, safe_blend, resume_blend (sim s), lockstep, wait_for_targets, target_wait and
+  startup_wait (wall s); realtime_priority, nice, cpu_affinity (OS scheduling)"""
 
 #: Upper ends of the gains' ranges (N*m/rad, N*m/(rad*s), N*m*s/rad): far above any stable HOAP-2 gain.
 GAIN_RANGES = {"kp": 2000.0, "ki": 2000.0, "kd": 200.0}
-#: Lockstep: stamps of early targets kept; past the limit the oldest half is dropped (a sim that far
-#: behind its controller has restarted).
+#: Targets kept by stamp until the state of their stamp applies them (lockstep: waits for them; otherwise
+#: every one stamped up to the state's stamp is applied); past the limit the oldest half is dropped (a
+#: sim that far behind its controller has restarted).
 TARGETS_KEEP = 512
 
 class PidNode(Node):
@@ -80,6 +86,10 @@ class PidNode(Node):
         self.startup_wait = float(declare(self, "startup_wait", float_param(
             "lockstep: wall s to wait for the first target", 1e-3, 1e4)))
         self.scheduling = declare_scheduling(self)  # applied once started (runtime.settle_process)
+        safe_blend = float(declare(self, "safe_blend", float_param(
+            "sim s of the C1 blend from the horizon's end to the standing crouch", 0.0, 10.0)))
+        resume_blend = float(declare(self, "resume_blend", float_param(
+            "sim s of the C1 blend back to the live targets (or to a newer horizon)", 0.0, 10.0)))
         self.law = self._build_law({})
         self.add_on_set_parameters_callback(self._on_set)
 
@@ -88,6 +98,11 @@ class PidNode(Node):
         self.v_target = np.zeros(len(JOINT_NAMES))
         self.targets_by_stamp: dict[int, object] = {}
         self.last_target_ns: int | None = None  # sim time of the last accepted target
+        self.live_ns: int | None = None  # outside lockstep: the newest stamp among the applied targets
+        self.bridge = GapBridge(default_standing_posture(), safe_blend, resume_blend)
+        self.gap = {"horizon_entries": 0, "horizon_states": 0, "safe_entries": 0, "safe_states": 0,
+                    "longest_gap_s": 0.0}
+        self.gap_warned = False
         self.tripped = False
         self.latest_state_ns = 0
         self.last_state_ns: int | None = None
@@ -97,6 +112,9 @@ class PidNode(Node):
         self.pub = self.create_publisher(JointState, "/joint_torques", 10)
         subs = [self.create_subscription(JointState, "/joint_targets", self._on_target, 10),
                 self.create_subscription(JointState, "/joint_states", self._on_state, 10)]
+        if not self.lockstep:  # lockstep answers each state with its own target: no horizon needed
+            subs.append(self.create_subscription(JointTrajectory, "/joint_trajectory",
+                                                 self._on_trajectory, 5))
         self.activity = ActivityStats()
         self.throttle = Throttle(1.0)
         self.hot = HotPath(self, subs)
@@ -120,6 +138,8 @@ class PidNode(Node):
                     changes[prm.name] = check_finite_scalar(prm.name, prm.value, 0.0)
                 elif prm.name in ("target_timeout", "target_wait", "startup_wait"):
                     check_finite_scalar(prm.name, prm.value, 1e-3)
+                elif prm.name in ("safe_blend", "resume_blend"):
+                    check_finite_scalar(prm.name, prm.value, 0.0)
             law = self._build_law(changes) if changes else None
         except (ValueError, TypeError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
@@ -133,6 +153,10 @@ class PidNode(Node):
                 self.target_wait = float(prm.value)
             elif prm.name == "startup_wait":
                 self.startup_wait = float(prm.value)
+            elif prm.name == "safe_blend":
+                self.bridge.safe_blend_s = float(prm.value)
+            elif prm.name == "resume_blend":
+                self.bridge.resume_blend_s = float(prm.value)
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------------------------- callbacks
@@ -143,12 +167,12 @@ class PidNode(Node):
             self.throttle.warn(self, reason_key(exc),
                                f"rejected /joint_targets: {exc}")
             return
+        t = stamp_ns(msg)
+        self.targets_by_stamp.setdefault(t, []).append(cmd)  # applied by the state of its stamp (_answer)
+        if len(self.targets_by_stamp) > TARGETS_KEEP:
+            for key in sorted(self.targets_by_stamp)[:TARGETS_KEEP // 2]:
+                del self.targets_by_stamp[key]
         if self.lockstep:
-            t = stamp_ns(msg)
-            self.targets_by_stamp.setdefault(t, []).append(cmd)
-            if len(self.targets_by_stamp) > 512:
-                for key in sorted(self.targets_by_stamp)[:256]:
-                    del self.targets_by_stamp[key]
             if self.tripped and t >= self.latest_state_ns:
                 self._untrip()
             if self.pending is not None and self.pending[0] in self.targets_by_stamp:
@@ -156,7 +180,6 @@ class PidNode(Node):
                 self.pending = None
                 self._answer(t_ns, q, v)
         else:
-            self._apply(cmd)
             self.last_target_ns = self.latest_state_ns
             if self.tripped:
                 self._untrip()
@@ -164,6 +187,12 @@ class PidNode(Node):
                 t_ns, q, v, _ = self.pending
                 self.pending = None
                 self._answer(t_ns, q, v)
+
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        try:
+            self.bridge.offer(read_joint_trajectory(msg))
+        except ValueError as exc:
+            self.throttle.warn(self, "trajectory " + reason_key(exc), f"rejected /joint_trajectory: {exc}")
 
     def _apply(self, cmd) -> None:
         self.q_target[cmd.index] = cmd.position
@@ -231,20 +260,63 @@ class PidNode(Node):
                 self.last_target_ns = t_ns
             for key in [k for k in self.targets_by_stamp if k < t_ns]:
                 del self.targets_by_stamp[key]
-        if (not self.tripped and self.last_target_ns is not None
+        else:  # every target stamped up to t, in stamp order (one sent ahead waits for its state)
+            due = [k for k in self.targets_by_stamp if k <= t_ns]
+            if not due and self.live_ns is None and self.targets_by_stamp:
+                due = [min(self.targets_by_stamp)]  # start-up: the first target, whatever its stamp
+            for key in sorted(due):
+                for cmd in self.targets_by_stamp.pop(key):
+                    self._apply(cmd)
+                self.live_ns = key if self.live_ns is None else max(self.live_ns, key)
+        q_ref, v_ref = self.q_target, self.v_target
+        if not self.lockstep and self.bridge.active:
+            q_ref, v_ref = self._bridge(t_ns)
+        elif (not self.tripped and self.last_target_ns is not None
                 and t_ns - self.last_target_ns > self.timeout_ns):
             self._trip(f"last target {(t_ns - self.last_target_ns) / 1e9:.3f} sim s old")
         elif self.tripped:
             self._trip("no fresh target")
         # sim s since the last answered state; 0 for the first (nothing to integrate over yet)
         dt = 0.0 if self.last_state_ns is None else max(0.0, (t_ns - self.last_state_ns) / 1e9)
-        tau = self.law.step(self.q_target, self.v_target, q, v, dt)
+        tau = self.law.step(q_ref, v_ref, q, v, dt)
         self.last_state_ns = t_ns
         self.answered_ns = t_ns
         self.pub.publish(self.b_tau.fill(t_ns, effort=tau))
 
+    def _bridge(self, t_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """The reference at t from the GapBridge (live targets, horizon or standing crouch); logs and
+        counts the gaps (a gap shorter than target_timeout is not logged: the horizon rides it out)."""
+        b = self.bridge
+        q_ref, v_ref = b.reference(t_ns, self.q_target, self.v_target, self.live_ns)
+        gap_s = 0.0 if self.live_ns is None else (t_ns - self.live_ns) / 1e9
+        g = self.gap
+        if b.switched is not None:
+            came_from, mode = b.switched
+            if mode == HORIZON and came_from != HORIZON:
+                g["horizon_entries"] += 1
+            elif mode == SAFE:
+                g["safe_entries"] += 1
+                self.gap_warned = True
+                self.get_logger().warn(
+                    f"no target for {gap_s:.3f} sim s and the horizon ended at "
+                    f"{b.newest.end_ns / 1e9:.3f} s: blending to the standing posture over "
+                    f"{b.safe_blend_s:g} s")
+            elif mode == LIVE and self.gap_warned:
+                self.gap_warned = False
+                self.get_logger().info(f"targets resumed (from {came_from}): blending back over "
+                                       f"{b.resume_blend_s:g} s")
+        if b.mode != LIVE:
+            g[f"{b.mode}_states"] += 1
+            g["longest_gap_s"] = max(g["longest_gap_s"], round(gap_s, 6))
+            if b.mode == HORIZON and not self.gap_warned and gap_s * 1e9 > self.timeout_ns:
+                self.gap_warned = True
+                self.get_logger().warn(f"targets late ({gap_s:.3f} sim s): following the "
+                                       f"/joint_trajectory horizon (to {b.trajectory.end_ns / 1e9:.3f} s)")
+        return q_ref, v_ref
+
     def on_exit(self) -> None:
-        exit_log(self, "stats " + json.dumps({**self.activity.summary(), "gc": gc_summary(self)}))
+        exit_log(self, "stats " + json.dumps({**self.activity.summary(), "gaps": self.gap,
+                                              "gc": gc_summary(self)}))
 
 
 

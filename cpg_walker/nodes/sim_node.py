@@ -3,8 +3,11 @@
 The loop runs in ``main`` (not on a timer): for each control period k it publishes the state stamped
 t_k = k * control_period, services callbacks (in lockstep until the torque stamped t_k has arrived), then
 steps the physics for the period with the latest torque (zero-order hold). Pacing: ``realtime`` sleeps to
-the wall schedule, ``fast`` never waits, ``lockstep`` waits for each period's command. Parameter values:
-config/sim.yaml (``--params-file``).
+the wall schedule, ``fast`` never waits, ``lockstep`` waits for each period's command. In ``realtime`` a
+period whose torque is late runs on the held one if that is at most ``max_torque_age`` old, else waits
+for a recent one up to ``late_torque_wait`` wall s past the deadline (sim time pauses rather than the
+physics running open loop), then goes on with the held torque and re-bases the schedule (see
+docs/ROS_INTERFACE.md, "Pacing"). Parameter values: config/sim.yaml (``--params-file``).
 """
 
 from __future__ import annotations
@@ -66,7 +69,8 @@ publishes: /clock (rosgraph_msgs/Clock), /joint_states (sensor_msgs/JointState: 
 subscribes: /joint_torques (sensor_msgs/JointState: name + effort in N*m, stamp = the state it answers)
 services: ~/reset, ~/push (std_srvs/Trigger)
 parameters: pacing (realtime|fast|lockstep), control_period (s), real_time_factor, duration (sim s,
-  0 = run until stopped), stop_on_fall, wait_for_controller, lockstep_resend (wall s), odom_period,
+  0 = run until stopped), stop_on_fall, wait_for_controller, lockstep_resend and late_torque_wait
+  (wall s), max_torque_age (sim s), odom_period,
   diagnostics_period (sim s), imu_variance_floor, push.force [N,N,N], push.body, push.duration (s),
   record_path, record_period (s), realtime_priority, nice, cpu_affinity (OS scheduling, realtime pacing)"""
 
@@ -111,6 +115,12 @@ class SimNode(Node):
             "hold the first period until a torque arrives (every pacing)", read_only=True)))
         self.resend_s = float(p("lockstep_resend", float_param(
             "wall s without an answer before the state is re-sent", 0.001, 10.0)))
+        self.late_wait_s = float(p("late_torque_wait", float_param(
+            "realtime: wall s past a period's deadline to wait for a torque at most max_torque_age old "
+            "before going on with the held one (0 = never wait)", 0.0, 10.0)))
+        self.max_age_ns = round(p("max_torque_age", float_param(
+            "realtime: sim s a torque may be old and still drive a period without waiting", 0.0, 1.0,
+            read_only=True)) * 1e9)
         odom = p("odom_period", float_param("sim s between ground-truth odometry messages", 0.0, 10.0,
                                             read_only=True))
         diag = p("diagnostics_period", float_param("sim s between /diagnostics messages", 0.01, 100.0,
@@ -170,7 +180,14 @@ class SimNode(Node):
         self.tau_stamp = -1
         self.published_at: dict[int, float] = {}
         self.latencies: list[float] = []
-        self.late = 0
+        self.late = 0  # realtime: periods whose torque was not there by the deadline, of which
+        self.late_recent = 0  # ... ran on one at most max_torque_age old
+        self.late_waited = 0  # ... waited for one that recent, and got it (late_torque_wait)
+        self.late_held = 0  # ... did not: the period ran with the held torque
+        self.late_wait_wall = 0.0  # wall s spent waiting past deadlines (in all, longest once)
+        self.late_wait_max = 0.0
+        self.held_stamp: int | None = None  # after a wait gave up: the held torque's stamp (no more
+        #                                     waits until a newer torque arrives)
         self.resends = 0
         self.torque_age: list[int] = []
         self.fallen = False
@@ -201,6 +218,8 @@ class SimNode(Node):
                     self.pusher.body_id(str(prm.value))
                 elif prm.name == "lockstep_resend":
                     self.resend_s = check_finite_scalar(prm.name, prm.value, 0.001, 10.0)
+                elif prm.name == "late_torque_wait":
+                    self.late_wait_s = check_finite_scalar(prm.name, prm.value, 0.0, 10.0)
             except (ValueError, TypeError) as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
@@ -292,7 +311,8 @@ class SimNode(Node):
             ("real_time_factor", f"{self.achieved_rtf():.3f}"), ("fallen", self.fallen),
             ("fall_criterion", f"torso z < {self.sim.min_torso_height} m or tilt > "
                                f"{self.sim.max_tilt_deg} deg"),
-            ("late_commands", self.late), ("resends", self.resends))]
+            ("late_commands", self.late), ("late_recent", self.late_recent),
+            ("late_waited", self.late_waited), ("late_held", self.late_held), ("resends", self.resends))]
         msg = DiagnosticArray(status=[st])
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
         self.pub_diag.publish(msg)
@@ -316,6 +336,43 @@ class SimNode(Node):
                 self.resend_state(t_ns)
                 last = now
         return True
+
+    def _wait_late(self, t_ns: int, deadline: float) -> None:
+        """Realtime, the torque stamped t_ns missed its deadline. A torque at most max_torque_age old is
+        used as it is (zero-order hold). An older one is not: the period waits, up to late_torque_wait
+        wall s past the deadline, until one that recent has arrived (sim time pauses; the caller then
+        re-bases the schedule, no catch-up burst). If none comes, the period runs with the held torque,
+        and no period waits again until a newer torque than that one has arrived (a dead controller
+        must not slow the sim down to one period per wait)."""
+        oldest = t_ns - self.max_age_ns
+        if self.tau_stamp >= oldest:
+            self.late_recent += 1
+            return
+        if self.held_stamp is not None:
+            if self.tau_stamp <= self.held_stamp:
+                self.late_held += 1
+                return
+            self.held_stamp = None
+        w0 = time.perf_counter()
+        give_up = deadline + self.late_wait_s
+        while self.tau_stamp < oldest and rclpy.ok():
+            now = time.perf_counter()
+            if now >= give_up:
+                self.hot.poll(0.0)  # what arrived while this process was not running
+                break
+            self.hot.poll(min(give_up - now, 0.005))
+            self.slow_spin(time.perf_counter())
+        waited = time.perf_counter() - w0
+        self.late_wait_wall += waited
+        self.late_wait_max = max(self.late_wait_max, waited)
+        if self.tau_stamp >= oldest:
+            self.late_waited += 1
+        else:
+            self.late_held += 1
+            self.held_stamp = self.tau_stamp
+            self.get_logger().warn(
+                f"no /joint_torques for {t_ns / 1e9:.3f} s within {self.late_wait_s:g} wall s of its "
+                "deadline: going on with the held torque", throttle_duration_sec=2.0)
 
     def slow_spin(self, now: float) -> None:
         """Parameters and services, through the executor, at most every SLOW_SPIN_PERIOD_S of wall time."""
@@ -356,6 +413,7 @@ class SimNode(Node):
                 self.slow_spin(time.perf_counter())
                 if self.tau_stamp != t_ns:
                     self.late += 1
+                    self._wait_late(t_ns, deadline)
                 remaining = deadline - time.perf_counter()
                 if remaining > 0:
                     time.sleep(remaining)
@@ -393,6 +451,9 @@ class SimNode(Node):
             "periods": self.k, "sim_s": self.k * self.period_ns / 1e9,
             "wall_s": round((self.wall_end - self.wall_start) if self.wall_start else 0.0, 4),
             "real_time_factor": round(self.achieved_rtf(), 4), "late_commands": self.late,
+            "late_recent": self.late_recent, "late_waited": self.late_waited, "late_held": self.late_held,
+            "late_wait_wall_s": round(self.late_wait_wall, 3),
+            "late_wait_max_s": round(self.late_wait_max, 4),
             "resends": self.resends, "cpu_s": round(time.process_time() - self.cpu_start, 3),
             "latency": latency_summary(self.latencies[1:]),
             "torque_age_s": {"mean": round(float(age.mean()), 6), "max": round(float(age.max()), 6)},
@@ -400,7 +461,9 @@ class SimNode(Node):
         }
         self.record.stats = stats
         exit_log(self, f"done: {stats['sim_s']:.3f} sim s in {stats['wall_s']:.3f} wall s, "
-                               f"real-time factor {stats['real_time_factor']:.3f}")
+                               f"real-time factor {stats['real_time_factor']:.3f}, late commands "
+                               f"{self.late} (ran on the previous {self.late_recent}, waited "
+                               f"{self.late_waited}, held {self.late_held})")
         if self.record_path:
             self.record.save(self.record_path)
 

@@ -2,7 +2,8 @@
 
 A joint command names any subset of the HOAP-2 joints and gives one value per name in each non-empty
 array (the ``sensor_msgs/JointState`` convention). ``validate_joint_command`` turns one into index and
-value arrays or raises ValueError with the reason, so a bad message never reaches the robot.
+value arrays or raises ValueError with the reason, so a bad message never reaches the robot;
+``validate_joint_trajectory`` does the same for a horizon of future targets (``JointTrajectory``).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cpg_walker.robot.joints import JOINT_NAMES
+from cpg_walker.robot.trajectory import Trajectory
 
 _INDEX = {name: i for i, name in enumerate(JOINT_NAMES)}
 _ALL_NAMES = list(JOINT_NAMES)
@@ -46,16 +48,7 @@ def validate_joint_command(
     names = list(names)
     # every joint in JOINT_NAMES order (what the nodes send, 500 times a second): no name to check
     everything = known is JOINT_NAMES and names == _ALL_NAMES
-    if not everything:
-        if not names:
-            raise ValueError("no joint names")
-        if len(set(names)) != len(names):
-            dup = sorted({n for n in names if names.count(n) > 1})
-            raise ValueError(f"duplicate joint name(s) {dup}")
-        index = _INDEX if known is JOINT_NAMES else {n: i for i, n in enumerate(known)}
-        unknown = [n for n in names if n not in index]
-        if unknown:
-            raise ValueError(f"unknown joint name(s) {unknown[:5]}{' ...' if len(unknown) > 5 else ''}")
+    idx = _ALL_INDEX if everything else joint_index(names, known)
     fields: dict[str, np.ndarray | None] = {}
     for label, values in (("position", position), ("velocity", velocity), ("effort", effort)):
         arr = np.asarray(values, dtype=float).reshape(-1)
@@ -71,8 +64,54 @@ def validate_joint_command(
         fields[label] = arr
     if fields.get(require) is None:
         raise ValueError(f"no {require} values")
-    idx = _ALL_INDEX if everything else np.array([index[n] for n in names], dtype=int)
     return JointCommand(idx, fields["position"], fields["velocity"], fields["effort"])
+
+
+def joint_index(names: Sequence[str], known: Sequence[str] = JOINT_NAMES) -> np.ndarray:
+    """Indices of ``names`` in ``known``; ValueError for no names, duplicate or unknown names."""
+    names = list(names)
+    if not names:
+        raise ValueError("no joint names")
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise ValueError(f"duplicate joint name(s) {dup}")
+    index = _INDEX if known is JOINT_NAMES else {n: i for i, n in enumerate(known)}
+    unknown = [n for n in names if n not in index]
+    if unknown:
+        raise ValueError(f"unknown joint name(s) {unknown[:5]}{' ...' if len(unknown) > 5 else ''}")
+    return np.array([index[n] for n in names], dtype=int)
+
+
+def validate_joint_trajectory(names: Sequence[str], start_ns: int, offsets_ns: Sequence[int],
+                              positions: Sequence[Sequence[float]],
+                              velocities: Sequence[Sequence[float]]) -> Trajectory:
+    """Check a JointTrajectory-like horizon (points at ``start_ns`` + ``offsets_ns``) and return it as a
+    `robot.trajectory.Trajectory`. Rejects (ValueError with the reason): bad names (as
+    `validate_joint_command`), no points, point times negative or not strictly increasing, a point
+    without one position per name, velocities in some points only or of the wrong length, NaN or inf.
+    Points without velocities get them by finite differences (one point: 0)."""
+    index = joint_index(names)
+    n = len(index)
+    offs = np.asarray(offsets_ns, dtype=np.int64).reshape(-1)
+    if offs.size == 0:
+        raise ValueError("no trajectory points")
+    if offs[0] < 0 or np.any(np.diff(offs) <= 0):
+        raise ValueError("point times (time_from_start) must be >= 0 and strictly increasing")
+    q = _point_matrix("positions", positions, offs.size, n)
+    if all(len(v) == 0 for v in velocities):
+        qd = np.gradient(q, offs * 1e-9, axis=0) if offs.size > 1 else np.zeros_like(q)
+    else:
+        qd = _point_matrix("velocities", velocities, offs.size, n)
+    return Trajectory(int(start_ns), offs, index, q, qd)
+
+
+def _point_matrix(label: str, rows: Sequence[Sequence[float]], points: int, joints: int) -> np.ndarray:
+    if len(rows) != points or any(len(r) != joints for r in rows):
+        raise ValueError(f"every trajectory point needs {joints} {label} (one per joint name)")
+    arr = np.array([np.asarray(r, dtype=float) for r in rows])
+    if not np.isfinite(arr).all():
+        raise ValueError(f"non-finite {label} in the trajectory")
+    return arr
 
 
 def reason_key(error: Exception | str) -> str:

@@ -430,6 +430,40 @@ class HumanoidCPG:
         qd = net.gain * np.einsum("bi,bi->b", net.alpha, self._deriv[0])
         return q, qd
 
+    def forecast(self, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(q*, q̇*) of the 10 DOFs at ``offsets`` (s ahead, non-decreasing, >= 0): what `joint_targets`
+        will give after stepping that far, predicted without changing the controller
+        (`CPGNetwork.forecast`, RK4 at up to the guard's step). While a ζ/α command is being reached the
+        filters' future is that of `step` at ``control_dt`` (exact, `_filter_path`): ζ at each interval's
+        middle, α at each point. Two (K, 10) arrays."""
+        offsets = np.asarray(offsets, dtype=float).reshape(-1)
+        zc, ac = self.zeta_command, self.alpha_command
+        if (self._zf == zc).all() and (self._af == ac).all():  # settled: as applied now
+            return self.net.forecast(offsets)
+        h = self.settings.control_dt
+        mid = np.concatenate(([0.0], offsets[:-1])) if offsets.size else offsets
+        zeta = self._filter_path(self._zf, zc, np.rint(0.5 * (mid + offsets) / h))
+        amp = self._filter_path(self._af, ac, np.rint(offsets / h))
+        return self.net.forecast(offsets, zeta=zeta, amplitude=amp)
+
+    def _filter_path(self, state: np.ndarray, command: float, steps: np.ndarray) -> np.ndarray:
+        """The output of the cascaded lags (`_filter`) after each of ``steps`` steps of control_dt, in
+        closed form: the error e = state - command evolves as e <- A e with A = d·I + L (d = e^(-dt/T),
+        L strictly lower triangular), so A^n = d^n I + n d^(n-1) L + n(n-1)/2 d^(n-2) L² (L³ = 0)."""
+        T = self.settings.modulation_time_constant
+        if T <= 0:
+            return np.full(steps.shape, command)
+        d = math.exp(-self.settings.control_dt / T)
+        c = 1.0 - d
+        L = np.array([[0.0, 0.0, 0.0], [c * d, 0.0, 0.0], [c * c * d, c * d, 0.0]])
+        e = state - command
+        Le, L2e = L @ e, L @ (L @ e)
+        n = np.asarray(steps, dtype=float)
+        dn = d ** n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = dn * e[2] + n * dn / d * Le[2] + 0.5 * n * (n - 1) * dn / (d * d) * L2e[2]
+        return command + out
+
     # ------------------------------------------------------------------ storage (walker/storage.py)
     def to_dict(self) -> dict:
         from cpg_walker.walker import storage

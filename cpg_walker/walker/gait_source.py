@@ -96,6 +96,36 @@ class CPGGaitSource:
             return self.playback.targets(t)
         self._advance(t)
         qc, qdc = self.ctrl.joint_targets()
+        return self._compose(t, qc, qdc)
+
+    def forecast(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The targets ``targets(t)`` will give at ``times`` (sim s, non-decreasing), predicted without
+        advancing the source: the recording where it plays (exact), the CPG's future from
+        `HumanoidCPG.forecast` from the network's current time on, composed as `targets` does. Times
+        before the network's time take the network's current output; pending ``schedule`` commands
+        and feedback changes are not foreseen. Two (K, 25) arrays."""
+        times = np.asarray(times, dtype=float).reshape(-1)
+        q = np.empty((times.size, len(JOINT_NAMES)))
+        qd = np.empty_like(q)
+        cpg = times >= self.handover
+        for k in np.flatnonzero(~cpg):
+            q[k], qd[k] = self.playback.targets(float(times[k]))
+        if cpg.any():
+            qc, qdc = self.ctrl.forecast(np.maximum(times[cpg] - self._t_net, 0.0))
+            rows = np.flatnonzero(cpg)
+            u = (times[rows] - self.handover) / self.blend if self.blend > 0 else np.ones(rows.size)
+            done = u >= 1.0  # past the cross-fade (what _compose gives, for all these points at once)
+            q[rows[done]] = self.hold
+            q[np.ix_(rows[done], self._idx)] = qc[done]
+            qd[rows[done]] = 0.0
+            qd[np.ix_(rows[done], self._idx)] = qdc[done]
+            for j in np.flatnonzero(~done):
+                q[rows[j]], qd[rows[j]] = self._compose(float(times[rows[j]]), qc[j], qdc[j])
+        return q, qd
+
+    def _compose(self, t: float, qc: np.ndarray, qdc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """All joints' (q, q̇) at t >= handover from the CPG DOFs' (qc, qdc): the cross-fade, then the CPG
+        with the other joints held."""
         q = self.hold.copy()
         qd = np.zeros(len(JOINT_NAMES))
         u = (t - self.handover) / self.blend if self.blend > 0 else 1.0
