@@ -144,6 +144,7 @@ class SimNode(Node):
                                 / 1e9)
         self.record_every = max(1, round(self.record.log_dt * 1e9 / self.period_ns))
         self.pusher = Pusher(self.sim)
+        self.start_xy = self.sim.base_pose()[0][:2].copy()  # where the walk is measured from (and ~/reset)
         checked = self._on_set(self.get_parameters(["push.force", "push.body"]))  # as a later change is
         if not checked.successful:
             raise ValueError(checked.reason)
@@ -244,6 +245,7 @@ class SimNode(Node):
 
     def _on_reset(self, request, response):
         self.sim.reset()
+        self.start_xy = self.sim.base_pose()[0][:2].copy()
         self.pusher.clear()
         self.fallen = False
         self._publish_fallen()
@@ -442,6 +444,13 @@ class SimNode(Node):
                 break
         self.wall_end = time.perf_counter()
 
+    def _outcome(self) -> str:
+        """The run in words for the closing log line: the fall, or how far the base went."""
+        moved = float(np.linalg.norm(self.sim.base_pose()[0][:2] - self.start_xy))
+        if self.record.fell:
+            return f"the robot FELL at {self.record.fall_time_s:.3f} s"
+        return f"no fall; base {moved:.3f} m from where it started"
+
     def on_exit(self) -> None:
         if self.wall_end is None:
             self.wall_end = time.perf_counter()
@@ -463,7 +472,7 @@ class SimNode(Node):
         exit_log(self, f"done: {stats['sim_s']:.3f} sim s in {stats['wall_s']:.3f} wall s, "
                                f"real-time factor {stats['real_time_factor']:.3f}, late commands "
                                f"{self.late} (ran on the previous {self.late_recent}, waited "
-                               f"{self.late_waited}, held {self.late_held})")
+                               f"{self.late_waited}, held {self.late_held}); {self._outcome()}")
         if self.record_path:
             self.record.save(self.record_path)
 
