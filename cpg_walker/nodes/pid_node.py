@@ -208,20 +208,19 @@ class PidNode(Node):
             self.v_target[:] = 0.0
             self.get_logger().warn(f"targets stale ({why}): holding the last target posture")
         else:
-            self.get_logger().warn(f"targets still stale ({why}): holding the last target posture",
-                                   throttle_duration_sec=2.0)
+            self.throttle.warn(self, "still stale", f"targets still stale ({why}): holding the last target "
+                               "posture")
 
     def _on_state(self, msg: JointState) -> None:
         self.activity.tick()
         if msg.name == self.names and len(msg.position) == len(msg.velocity) == len(self.names):
             q, v = np.asarray(msg.position), np.asarray(msg.velocity)
             if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
-                self.get_logger().warn("rejected /joint_states: non-finite value",
-                                       throttle_duration_sec=1.0)
+                self.throttle.warn(self, "state non-finite", "rejected /joint_states: non-finite value")
                 return
         else:
-            self.get_logger().warn("rejected /joint_states: expected position and velocity of all "
-                                   f"{len(self.names)} joints in order", throttle_duration_sec=1.0)
+            self.throttle.warn(self, "state layout", "rejected /joint_states: expected position and "
+                               f"velocity of all {len(self.names)} joints in order")
             return
         t = stamp_ns(msg)
         if t == self.answered_ns:  # a re-sent state: answer again, identically

@@ -372,9 +372,9 @@ class SimNode(Node):
         else:
             self.late_held += 1
             self.held_stamp = self.tau_stamp
-            self.get_logger().warn(
-                f"no /joint_torques for {t_ns / 1e9:.3f} s within {self.late_wait_s:g} wall s of its "
-                "deadline: going on with the held torque", throttle_duration_sec=2.0)
+            self.throttle.warn(
+                self, "held torque", f"no /joint_torques for {t_ns / 1e9:.3f} s within "
+                f"{self.late_wait_s:g} wall s of its deadline: going on with the held torque")
 
     def slow_spin(self, now: float) -> None:
         """Parameters and services, through the executor, at most every SLOW_SPIN_PERIOD_S of wall time."""
