@@ -136,9 +136,13 @@ def test_topics_types_rates_services_and_fall_status(graph, probe):
     # push (120 N sideways for 0.3 s) topples the robot; the fall is reported, reset stands it up
     assert probe.call(Trigger, "/sim/push").success
     probe.wait(lambda: got["/sim/fallen"][-1][1].data, "a fall reported on /sim/fallen")
-    got["/diagnostics"].clear()
-    probe.wait(lambda: len(got["/diagnostics"]) > 0, "/diagnostics after the fall")
-    assert got["/diagnostics"][-1][1].status[0].level == DiagnosticStatus.ERROR
+    # the fall in /diagnostics too, and no report stamped after it says otherwise (messages of different
+    # topics may arrive in any order: an older OK report can come in after /sim/fallen)
+    errors = lambda: [stamp_ns(m) for _, m in got["/diagnostics"]  # noqa: E731
+                      if m.status[0].level == DiagnosticStatus.ERROR]
+    probe.wait(lambda: errors(), "/diagnostics reporting the fall")
+    after = [m.status[0] for _, m in got["/diagnostics"] if stamp_ns(m) >= min(errors())]
+    assert all(st.level == DiagnosticStatus.ERROR and st.message == "fallen" for st in after), after
     reset = probe.call(Trigger, "/sim/reset")
     assert reset.success, reset.message
     reset_ns = round(float(re.search(r"at sim time ([0-9.]+) s", reset.message).group(1)) * 1e9)
