@@ -39,7 +39,7 @@ from cpg_walker.experiments.walk_runs import Push, WalkSpec, default_pathways, r
 from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig
 
 _SCENARIO_KEYS = {"name", "zeta", "alpha", "start", "duration_after_s", "friction_scale", "push", "schedule"}
-_PUSH_KEYS = {"at_s", "impulse_Ns", "duration_s", "direction"}
+_PUSH_KEYS = {"at_s", "impulse_ns", "duration_s", "direction"}
 
 
 def load_config(path: str | Path | None = None, quick: bool = False) -> dict:
