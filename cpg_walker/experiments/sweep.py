@@ -265,24 +265,25 @@ def _plt():
     return plt
 
 
-def _series(runs, key):
+def _lines(ax, runs: list[dict], key: str) -> None:
+    """One line per variant × start through the runs that did not fall; a fall is an × on the ζ axis
+    (its speed, heading and drift are the fall's, not the gait's)."""
     ok = [r for r in runs if "error" not in r]
     for v in dict.fromkeys(r["variant"] for r in ok):
         for s in dict.fromkeys(r["start"] for r in ok):
             rs = sorted((r for r in ok if r["variant"] == v and r["start"] == s), key=lambda r: r["zeta"])
-            if rs:
-                yield v, s, rs, [r[key] for r in rs]
+            walked = [r for r in rs if not r["fell"]]
+            line, = ax.plot([r["zeta"] for r in walked], [r[key] for r in walked],
+                            "-o" if s == "standing" else "--s", ms=4, label=f"{v}, {s}")
+            fell = [r["zeta"] for r in rs if r["fell"]]
+            if fell:
+                ax.plot(fell, [0.0] * len(fell), "x", ms=10, mew=2, color=line.get_color())
 
 
 def plot_speed(report: dict, path: Path) -> Path:
     plt = _plt()
     fig, ax = plt.subplots(figsize=(8, 4.5))
-    for v, s, rs, ys in _series(report["runs"], "steady_speed_mps"):
-        line, = ax.plot([r["zeta"] for r in rs], ys, "-o" if s == "standing" else "--s", ms=4,
-                        label=f"{v}, {s}")
-        fz = [(r["zeta"], y) for r, y in zip(rs, ys, strict=True) if r["fell"]]
-        if fz:
-            ax.plot(*zip(*fz, strict=True), "x", ms=10, mew=2, color=line.get_color())
+    _lines(ax, report["runs"], "steady_speed_mps")
     paper = report["config"]["paper"]
     pts = paper["speed_points"]
     ax.plot([p["zeta"] for p in pts], [p["speed_mps"] for p in pts], "k*", ms=14, label="paper (Sec. IV)")
@@ -291,7 +292,7 @@ def plot_speed(report: dict, path: Path) -> Path:
     ax.axhline(0, color="0.8", lw=0.8)
     ax.set_xlabel("ζ")
     ax.set_ylabel("speed (m/s, second half of the window)")
-    ax.set_title("speed vs ζ (× = fell; speed up to the fall)")
+    ax.set_title("speed vs ζ (× on the axis = fell)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
@@ -330,17 +331,12 @@ def plot_heading(report: dict, path: Path) -> Path:
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for key, ax in zip(("heading_change_deg", "lateral_drift_m"), axes, strict=True):
-        for v, s, rs, ys in _series(report["runs"], key):
-            line, = ax.plot([r["zeta"] for r in rs], ys, "-o" if s == "standing" else "--s", ms=4,
-                            label=f"{v}, {s}")
-            fz = [(r["zeta"], y) for r, y in zip(rs, ys, strict=True) if r["fell"]]
-            if fz:
-                ax.plot(*zip(*fz, strict=True), "x", ms=10, mew=2, color=line.get_color())
+        _lines(ax, report["runs"], key)
         ax.axhline(0, color="0.8", lw=0.8)
         ax.set_xlabel("ζ")
         ax.set_ylabel(key)
         ax.grid(alpha=0.3)
-    axes[0].set_title("heading change over the window (× = fell)")
+    axes[0].set_title("heading change over the window (× on the axis = fell)")
     axes[1].set_title("lateral drift over the window")
     axes[0].legend(fontsize=7)
     fig.tight_layout()
@@ -379,8 +375,12 @@ def plot_fig8(report: dict, path: Path) -> Path:
 
     plt = _plt()
     cfg = report["config"]["fig8"]
-    t0 = start_time(cfg["start"]) + float(cfg["plot_from_s"])
-    t1 = t0 + float(cfg["plot_periods"]) * report["gait_period_s"] / abs(float(cfg["zeta"]))
+    t_change = start_time(cfg["start"])
+    span = float(cfg["plot_periods"]) * report["gait_period_s"] / abs(float(cfg["zeta"]))
+    t0 = t_change + float(cfg["plot_from_s"])
+    falls = [r["fall_time_s"] for r in report["fig8"]["runs"] if r.get("fell")]
+    t1 = min([t0 + span, *falls])  # the window ends before the first fall...
+    t0 = max(t_change, min(t0, t1 - span))  # ...and starts earlier if it must, not before the change
     fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
     for r in report["fig8"]["runs"]:
         if "error" in r or "targets" not in r:
