@@ -62,7 +62,7 @@ def test_sweep_writes_json_markdown_and_pngs(tmp_path):
     labels = sorted(r["spec"]["label"] for r in report["alpha"])
     assert labels == ["alpha", "stop_resume"]
     sr = next(r for r in report["alpha"] if r["spec"]["label"] == "stop_resume")
-    assert len(sr["segments"]) == 3
+    assert len(sr["segments"]) == 3 and isinstance(sr["stops_and_resumes"], bool)
     fig8 = report["fig8"]["runs"]
     assert [r["variant"] for r in fig8] == ["off", "ours"]
     assert len(fig8[0]["targets"]["names"]) == 10 and len(fig8[0]["targets"]["rows"]) > 50

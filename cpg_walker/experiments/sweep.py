@@ -25,6 +25,8 @@ from cpg_walker.experiments.walk_runs import Push, WalkSpec, run_many, run_walk,
 from cpg_walker.robot.joints import PAPER_LEG_DOFS
 
 FIG8_DOFS = ("Hip1", "Ankle2", "Ankle1", "Knee")
+#: |speed| below which a walk counts as stopped (α = 0): 1 cm/s, a tenth of the gait's speed
+STOPPED_MPS = 0.01
 FIG8_SIDE = "r"
 
 
@@ -143,6 +145,11 @@ def run_sweep(out_dir: str | Path, quick: bool = False, jobs: int | None = None,
     n = len(pushes)
     push_res, grid_res = res[:n], res[n : n + len(grid)]
     alpha_res, fig8_res = res[n + len(grid) : n + len(grid) + len(alphas)], res[n + len(grid) + len(alphas):]
+    for r in alpha_res:
+        if r.get("spec", {}).get("label") == "stop_resume" and len(r.get("segments", [])) == 3:
+            before, stopped, resumed = (s["mean_speed_mps"] for s in r["segments"])
+            r["stops_and_resumes"] = bool(not r["fell"] and abs(stopped) < STOPPED_MPS
+                                          and abs(resumed) > 0.5 * abs(before) > 0)
     runs = grid_res
     for r, s in zip(runs, grid, strict=True):  # a crashed run keeps its coordinates
         r.setdefault("zeta", s.zeta)
@@ -238,7 +245,8 @@ def markdown(report: dict) -> str:
             seg = r.get("segments", [])
             txt = ", ".join(f"[{s['from_s']:g}, {s['to_s']:g}] s: {s['mean_speed_mps']:+.3f} m/s, "
                             f"{s['steps']} steps" for s in seg)
-            lines.append(f"\nα → 0 and back ({r['variant']}; fell: {r['fell']}): {txt}")
+            lines.append(f"\nα → 0 and back ({r['variant']}; fell: {r['fell']}; stops and resumes: "
+                         f"{r.get('stops_and_resumes')}): {txt}")
     lines += ["", f"## Largest lateral push recovered at ζ = {cfg['push']['zeta']:g}", "",
               f"Torso push {cfg['push']['duration_s']:g} s long at t = {cfg['push']['at_s']:g} s, "
               f"perpendicular to the heading; recovered = no fall for {cfg['push']['after_s']:g} s after "

@@ -49,8 +49,9 @@ def variant(name: str) -> tuple[tuple[str, ...] | None, dict]:
     """(pathways, FeedbackConfig overrides) of a named variant: off (no feedback), paper, ours."""
     if name == "off":
         return None, {}
-    if name == "paper":
-        return PAPER_PATHWAYS, dict(PAPER_OVERRIDES)
+    if name == "paper":  # overrides of fields FeedbackConfig still has
+        known = {f.name for f in fields(FeedbackConfig)}
+        return PAPER_PATHWAYS, {k: v for k, v in PAPER_OVERRIDES.items() if k in known}
     if name == "ours":
         return default_pathways(), {}
     raise ValueError(f"unknown feedback variant {name!r}; use off, paper or ours")
