@@ -148,7 +148,8 @@ def run_walk(spec: WalkSpec) -> dict:
     [t_cmd, end] (t_cmd = start_time(spec.start)): distance along, drift across and heading change
     relative to the pose at t_cmd, mean speed over the window, ``steady_speed_mps`` over its second
     half, step length (window distance / touchdowns in it), mean |torque| over the 10 CPG-driven
-    joints, fall time counted from t = 0."""
+    joints, fall time counted from t = 0. ``friction_scale`` multiplies the floor's sliding friction and
+    sets every geom to it (Hoap2Sim's ``friction``; hoap2.xml gives all geoms the floor's value)."""
     from cpg_walker.robot.hoap2 import Hoap2Sim
     from cpg_walker.robot.joints import JOINT_NAMES
     from cpg_walker.robot.pid import PidLaw
