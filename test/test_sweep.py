@@ -151,3 +151,24 @@ def test_cli_reports_a_bad_config_as_one_line(tmp_path, capsys):
     assert main(["sweep", "--out", str(tmp_path / "o"), "--config", str(cfg)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "sweep.yaml:3 variants" in err[0] and "'best'" in err[0]
+
+
+def test_run_many_keeps_order_and_reports_a_crashed_item():
+    import math as m
+
+    from cpg_walker.experiments.walk_runs import run_many
+
+    class Count:
+        n = 0
+
+        def update(self, k):
+            self.n = k
+
+    for jobs in (1, 2):
+        c = Count()
+        out = run_many(m.sqrt, [16.0, 4.0, -1.0, 9.0], jobs=jobs, progress=c)
+        assert out[:2] == [4.0, 2.0] and out[3] == 3.0, jobs
+        assert out[2] == {"error": "ValueError: math domain error"}
+        assert c.n == 4
+    with pytest.raises(ValueError, match="--jobs must be >= 1"):
+        run_many(m.sqrt, [1.0, 2.0], jobs=0)
