@@ -204,7 +204,6 @@ def search(out_dir: str | Path, generations: int | None = None, popsize: int | N
     if gens < 1 or pop < 2:
         raise ValueError(f"--generations must be >= 1 and --popsize >= 2, got {gens}, {pop}")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     space = Space(cfg["fields"])
     state_file, trials = out / "state.pkl", out / "trials.jsonl"
     setup = {"fields": cfg["fields"], "pathways": list(_pathways(cfg)), "popsize": pop, "seed": seed,
@@ -225,6 +224,7 @@ def search(out_dir: str | Path, generations: int | None = None, popsize: int | N
     else:
         if state_file.exists() or trials.exists():
             raise ValueError(f"{out} already holds a search; pass --resume to continue it, or another --out")
+        out.mkdir(parents=True, exist_ok=True)
         x0 = np.clip(space.normalise(asdict(FeedbackConfig.load())), 0.05, 0.95)
         es = cma.CMAEvolutionStrategy(x0.tolist(), float(cfg["cma"]["sigma0"]),
                                       {"seed": seed, "popsize": pop, "bounds": [0.0, 1.0], "verbose": -9})
