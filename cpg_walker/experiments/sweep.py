@@ -226,6 +226,10 @@ def markdown(report: dict) -> str:
     for k, d in fall_thresholds(runs).items():
         lines.append(f"| {k} | {d['first_fall_forward']} | {d['first_fall_backward']} | "
                      f"{d.get('walked_+1.5', '')} | {d.get('walked_-1', '')} |")
+    paper = cfg["paper"]
+    pts = ", ".join(f"ζ = {p['zeta']:g}: {p['speed_mps']:g} m/s" for p in paper["speed_points"])
+    lines += ["", f"The paper (Sec. IV): without feedback it falls above ζ = "
+              f"{paper['fall_threshold_without_feedback']:g}; with feedback {pts}, and walks backwards."]
     lines += ["", "Lateral drift (m) over the window:", "",
               "| ζ | " + " | ".join(f"{s}: {v}" for s, v in cols) + " |", "|---|" + "---|" * len(cols)]
     for z in zetas:
