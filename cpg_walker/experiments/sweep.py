@@ -10,8 +10,10 @@ The grid is data, in config/sweep.yaml (``--quick``: its ``quick:`` section merg
 * the largest lateral push recovered at ζ = 1 per variant and direction: bisection on the impulse;
 * the paper's Fig. 8: the Hip1, Ankle2, Ankle1, Knee targets at ζ = 1.2 with and without feedback.
 
-Every walk runs in a process pool (``jobs``). Writes DIR/sweep.json (``{"runs": [...], "alpha": ...,
-"push": ..., "fig8": ...}``), DIR/sweep.md and the PNGs speed_vs_zeta, fall_map, heading, alpha, fig8.
+A run's ``duration_s`` is the sim time walked from t = 0 (to the fall, if it fell), ``fall_time_s`` from
+t = 0 too; ``window_s`` is the measured window. Every walk runs in a process pool (``jobs``). Writes
+DIR/sweep.json (``{"runs": [...], "alpha": ..., "push": ..., "fig8": ...}``), DIR/sweep.md and the PNGs
+speed_vs_zeta, fall_map, heading, alpha, fig8.
 """
 
 from __future__ import annotations

@@ -35,13 +35,15 @@ _START = re.compile(r"^at_(\d+(?:\.\d+)?)s$")
 
 
 def default_pathways() -> tuple[str, ...]:
-    """"ours": the default pathway list of config/feedback.yaml — FeedbackConfig's ``pathways`` field
-    when it has one, else walker.feedback's ``DEFAULT_PATHWAYS``, else every pathway (PATHWAYS)."""
+    """"ours": the default pathway list of config/feedback.yaml — FeedbackConfig's ``pathways`` (or
+    ``default_pathways``) field when it has one, else walker.feedback's ``DEFAULT_PATHWAYS``, else every
+    pathway (PATHWAYS)."""
     from cpg_walker.walker import feedback
 
-    cfg = FeedbackConfig.load()
-    if "pathways" in {f.name for f in fields(FeedbackConfig)}:
-        return tuple(cfg.pathways)  # type: ignore[attr-defined]
+    names = {f.name for f in fields(FeedbackConfig)}
+    for key in ("pathways", "default_pathways"):
+        if key in names:
+            return tuple(getattr(FeedbackConfig.load(), key))
     return tuple(getattr(feedback, "DEFAULT_PATHWAYS", PATHWAYS))
 
 
