@@ -1,0 +1,49 @@
+"""`cpg-walker feedback-search --out DIR [--generations G] [--popsize P] [--seed S] [--jobs N] [--resume]
+[--quick] [--holdout]`: CMA-ES over the feedback gains named in config/feedback_search.yaml.
+
+Objective (minimised, summed over the searched scenarios — several ζ, change times, from standing — so
+robustness is part of it): survive first (a fall costs a large penalty minus the seconds survived after
+the command), then speed close to ζ·α × the open-loop ζ = 1 speed, straight (heading change and lateral
+drift per minute), low torque (mean |τ| of the CPG joints). Weights: the YAML's ``objective``; the formula:
+experiments/feedback_search.py. Writes DIR/trials.jsonl (every candidate: parameters, per-scenario
+metrics, objective), DIR/best.yaml (a config/feedback.yaml fragment), DIR/state.pkl (resumable).
+``--holdout`` judges DIR/best.yaml (against the defaults and the open loop) on the searched and the
+held-out scenarios (other ζ and change times, friction ±30 %, a push): DIR/holdout.json, holdout.md."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("feedback-search", help="CMA-ES search of the feedback gains; trials.jsonl, best.yaml",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", required=True, help="output directory (holds the resumable state)")
+    p.add_argument("--generations", type=int, default=None, metavar="G", help="total generations (YAML's)")
+    p.add_argument("--popsize", type=int, default=None, metavar="P", help="candidates per generation")
+    p.add_argument("--seed", type=int, default=1, metavar="S", help="CMA-ES seed (default 1)")
+    p.add_argument("--jobs", type=int, default=None, metavar="N", help="parallel walks (default: every core)")
+    p.add_argument("--resume", action="store_true", help="continue the search saved in DIR")
+    p.add_argument("--quick", action="store_true", help="short scenarios (the YAML's quick: section)")
+    p.add_argument("--config", default=None, metavar="FILE", help="default config/feedback_search.yaml")
+    p.add_argument("--holdout", action="store_true",
+                   help="after the search (or alone, with DIR/best.yaml from an earlier one) judge the best "
+                        "on held-out conditions")
+    p.add_argument("--no-search", action="store_true", help="with --holdout: skip the search")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    import json
+    import sys
+
+    from cpg_walker.experiments.feedback_search import holdout, search
+
+    if not args.no_search:
+        best = search(args.out, args.generations, args.popsize, args.seed, args.jobs, args.resume, args.quick,
+                      args.config, log=lambda s: print(s, file=sys.stderr))
+        print(json.dumps({"objective": best["objective"], "params": best["params"]}))
+    if args.holdout:
+        r = holdout(args.out, args.jobs, args.quick, args.config)
+        print(json.dumps({f"objective_{n}": r[f"objective_{n}"] for n in ("off", "default", "best")}))
+    return 0

@@ -1,0 +1,38 @@
+"""`cpg-walker sweep --out DIR [--quick] [--jobs N] [--duration S] [--config FILE] [--calibrate]`: issue 11's
+experiment — ζ forward/backward × feedback off/paper/ours × start standing/at 10 s, α sweep, largest push
+recovered, the paper's Fig. 8 (grid: config/sweep.yaml); DIR/sweep.json, sweep.md, PNGs."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("sweep", help="zeta x feedback x start sweep, alpha, pushes, Fig. 8; JSON + MD + PNG")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--quick", action="store_true", help="the small subset (config/sweep.yaml's quick:)")
+    p.add_argument("--jobs", type=int, default=None, metavar="N", help="parallel walks (default: every core)")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="sim s walked after each command (default: config/sweep.yaml's duration_after_s)")
+    p.add_argument("--config", default=None, metavar="FILE", help="a sweep YAML (default config/sweep.yaml)")
+    p.add_argument("--calibrate", action="store_true",
+                   help="only measure the zeta = 1 calibration of config/feedback.yaml (pitch reference, "
+                        "touchdown phase) and write DIR/calibration.json")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    from cpg_walker.experiments.sweep import calibrate, fall_thresholds, run_sweep
+
+    if args.calibrate:
+        cal = calibrate()
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        (Path(args.out) / "calibration.json").write_text(json.dumps(cal, indent=2) + "\n")
+        print(json.dumps(cal))
+        return 0
+    r = run_sweep(args.out, args.quick, args.jobs, args.config, args.duration)
+    print(json.dumps(fall_thresholds(r["runs"])))
+    return 0

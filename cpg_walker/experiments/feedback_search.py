@@ -1,0 +1,331 @@
+"""`cpg-walker feedback-search`: CMA-ES (the ``cma`` library) over the feedback gains, robustness in the
+objective, then a held-out judgement.
+
+Search space: the FeedbackConfig fields named in config/feedback_search.yaml (field -> [low, high]); CMA-ES
+works in [0, 1] per field (x = low + u·(high − low)), starting from config/feedback.yaml's values; every
+candidate is ``FeedbackConfig.load(**values)`` and walks with the configured pathways, so new fields and
+pathways need only a line in the YAML.
+
+Objective (minimised; summed over the scenarios, each one in-process walk, experiments/walk_runs.py):
+
+* survive first: a fall costs ``fall_penalty`` − (s survived after the command);
+* otherwise ``speed_weight``·|v − ζα·v₁| / max(|ζα|·v₁, min_speed) (v: speed over the second half of the
+  window; v₁: the open-loop ζ = 1 speed of the ``reference`` walk, measured once per search),
+  + ``heading_weight``·|Δheading| / (``heading_deg_per_min``·window min)
+  + ``drift_weight``·|lateral drift| / (``drift_m_per_min``·window min)
+  + ``torque_weight``·mean|τ| / ``torque_Nm``.
+
+The scenarios (several ζ, change times, from standing) make robustness part of it. Each generation's
+candidates × scenarios run in parallel; after each generation the CMA state (and numpy's global random
+state, which ``cma`` samples from) is pickled to DIR/state.pkl, so ``resume`` continues exactly where it
+stopped (same seed -> same candidates). DIR/trials.jsonl gets one line per candidate (parameters,
+per-scenario metrics, objective), DIR/best.yaml the best gains as a config/feedback.yaml fragment.
+``holdout`` then walks the best gains, the defaults and the open loop on the searched and the held-out
+scenarios (other ζ, change times, friction ±30 %, a push): DIR/holdout.json and holdout.md.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pickle
+from dataclasses import asdict, fields
+from pathlib import Path
+
+import numpy as np
+
+from cpg_walker.experiments.config_file import Config, deep_merge
+from cpg_walker.experiments.walk_runs import Push, WalkSpec, default_pathways, run_many, run_walk, start_time
+from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig
+
+_SCENARIO_KEYS = {"name", "zeta", "alpha", "start", "duration_after_s", "friction_scale", "push", "schedule"}
+_PUSH_KEYS = {"at_s", "impulse_ns", "duration_s", "direction"}
+
+
+def load_config(path: str | Path | None = None, quick: bool = False) -> dict:
+    """config/feedback_search.yaml (or ``path``), validated: each field a numeric FeedbackConfig field with
+    low < high, scenarios with known keys; one error naming file, line and key otherwise."""
+    from cpg_walker.paths import config_path
+
+    c = Config(path or config_path("feedback_search.yaml"))
+    d = c.data
+    for key in ("pathways", "fields", "cma", "objective", "reference", "scenarios", "holdout", "transition"):
+        if key not in d:
+            raise c.error((key,), "missing")
+    template = {k: v for k, v in d.items() if k != "quick"}
+    c.check_known(d.get("quick") or {}, template, ("quick",))
+    defaults = FeedbackConfig.load()
+    known = {f.name for f in fields(FeedbackConfig)}
+    if not isinstance(d["fields"], dict) or not d["fields"]:
+        raise c.error(("fields",), "expected a mapping field: [low, high]")
+    for name, rng in d["fields"].items():
+        if name not in known:
+            raise c.error(("fields", name),
+                          f"unknown FeedbackConfig field; known: {', '.join(sorted(known))}")
+        val = getattr(defaults, name)
+        if isinstance(val, bool) or not isinstance(val, (int, float)):
+            raise c.error(("fields", name), f"not a numeric field (its value is {val!r})")
+        if not (isinstance(rng, list) and len(rng) == 2 and all(isinstance(x, (int, float)) for x in rng)):
+            raise c.error(("fields", name), f"expected [low, high], got {rng!r}")
+        if not rng[0] < rng[1]:
+            raise c.error(("fields", name), f"low must be < high, got [{rng[0]}, {rng[1]}]")
+    p = d["pathways"]
+    if p != "default":
+        if not (isinstance(p, list) and all(x in PATHWAYS for x in p)):
+            raise c.error(("pathways",), f"'default' or a list of {list(PATHWAYS)}, got {p!r}")
+    for sect in ("scenarios", "holdout"):
+        for src, lst in ((d, d[sect]), (d.get("quick") or {}, (d.get("quick") or {}).get(sect))):
+            pre = (sect,) if src is d else ("quick", sect)
+            for i, s in enumerate(lst or []):
+                _check_scenario(c, s, (*pre, i))
+    cfg = deep_merge(template, d.get("quick") or {}) if quick else template
+    cm = cfg["cma"]
+    if not (cm["popsize"] >= 2 and cm["generations"] >= 1 and 0 < cm["sigma0"] <= 1):
+        raise c.error(("cma",), "need popsize >= 2, generations >= 1, 0 < sigma0 <= 1")
+    return cfg
+
+
+def _check_scenario(c: Config, s: object, key: tuple) -> None:
+    if not isinstance(s, dict) or "name" not in s:
+        raise c.error(key, "a scenario is a mapping with a name")
+    bad = sorted(set(s) - _SCENARIO_KEYS)
+    if bad:
+        raise c.error(key, f"unknown scenario key(s) {bad}; known: {sorted(_SCENARIO_KEYS)}")
+    if "push" in s and set(s["push"]) - _PUSH_KEYS:
+        raise c.error(key, f"push keys: {sorted(_PUSH_KEYS)}")
+    try:
+        start_time(s.get("start", "standing"))
+    except ValueError as exc:
+        raise c.error(key, str(exc)) from None
+
+
+def scenario_spec(s: dict, pathways: tuple[str, ...], overrides: dict | None, transition: str,
+                  variant: str = "search") -> WalkSpec:
+    """A WalkSpec from a scenario mapping; ``overrides`` None = open loop."""
+    kw = {k: v for k, v in s.items() if k not in ("name", "push", "schedule")}
+    push = Push(**s["push"]) if "push" in s else None
+    sched = tuple(tuple(x) for x in s.get("schedule", ()))
+    if overrides is None:
+        return WalkSpec(**kw, push=push, schedule=sched, variant="off", transition=transition,
+                        label=s["name"])
+    return WalkSpec(**kw, push=push, schedule=sched, variant=variant, pathways=tuple(pathways),
+                    overrides=dict(overrides), transition=transition, label=s["name"])
+
+
+def scenario_cost(m: dict, v1: float, obj: dict) -> float:
+    """The objective of one walk's metrics (module docstring)."""
+    if "error" in m:
+        return 2.0 * obj["fall_penalty"]
+    if m["fell"]:
+        return obj["fall_penalty"] - (m["fall_time_s"] - m["t_cmd_s"])
+    minutes = max(m["window_s"], 1e-6) / 60.0
+    target = m["zeta"] * m["alpha"] * v1
+    return (obj["speed_weight"] * abs(m["steady_speed_mps"] - target) / max(abs(target), obj["min_speed_mps"])
+            + obj["heading_weight"] * abs(m["heading_change_deg"]) / (obj["heading_deg_per_min"] * minutes)
+            + obj["drift_weight"] * abs(m["lateral_drift_m"]) / (obj["drift_m_per_min"] * minutes)
+            + obj["torque_weight"] * (m["mean_abs_torque_Nm"] or 0.0) / obj["torque_Nm"])
+
+
+def _brief(m: dict) -> dict:
+    keys = ("fell", "fall_time_s", "t_cmd_s", "window_s", "distance_m", "steady_speed_mps", "mean_speed_mps",
+            "heading_change_deg", "lateral_drift_m", "mean_abs_torque_Nm", "phase_resets", "error")
+    return {k: m[k] for k in keys if k in m}
+
+
+def _eval(spec: WalkSpec) -> dict:
+    try:
+        return run_walk(spec)
+    except ValueError as exc:  # a candidate FeedbackConfig rejected by its own validation
+        return {"error": str(exc)}
+
+
+class Space:
+    """The searched fields and their [low, high]: to and from the normalised [0, 1] coordinates."""
+
+    def __init__(self, ranges: dict[str, list[float]]):
+        self.names = list(ranges)
+        self.low = np.array([float(ranges[n][0]) for n in self.names])
+        self.high = np.array([float(ranges[n][1]) for n in self.names])
+
+    def values(self, u: np.ndarray) -> dict[str, float]:
+        x = self.low + np.clip(u, 0.0, 1.0) * (self.high - self.low)
+        return {n: float(v) for n, v in zip(self.names, x, strict=True)}
+
+    def normalise(self, values: dict[str, float]) -> np.ndarray:
+        x = np.array([float(values[n]) for n in self.names])
+        return (x - self.low) / (self.high - self.low)
+
+
+def _pathways(cfg: dict) -> tuple[str, ...]:
+    return default_pathways() if cfg["pathways"] == "default" else tuple(cfg["pathways"])
+
+
+def _reference_speed(out: Path, cfg: dict, jobs: int | None) -> float:
+    """v₁ (m/s): the open-loop reference walk's speed, measured once and kept in DIR/reference.json."""
+    f = out / "reference.json"
+    if f.is_file():
+        return float(json.loads(f.read_text())["v1_mps"])
+    ref = {"name": "reference", **cfg["reference"]}
+    m = run_walk(scenario_spec(ref, (), None, cfg["transition"]))
+    if m["fell"] or m["steady_speed_mps"] <= 0:
+        raise RuntimeError(f"the reference walk {cfg['reference']} fell or did not move forward: {_brief(m)}")
+    f.write_text(json.dumps({"v1_mps": m["steady_speed_mps"], "walk": _brief(m)}, indent=1) + "\n")
+    return float(m["steady_speed_mps"])
+
+
+def evaluate(candidates: list[dict], scenarios: list[dict], cfg: dict, v1: float, jobs: int | None,
+             progress=None) -> list[dict]:
+    """Walk every candidate (FeedbackConfig overrides; None = open loop) on every scenario in parallel;
+    per candidate: {"scenarios": {name: metrics + cost}, "objective": sum}."""
+    paths = _pathways(cfg)
+    specs = [scenario_spec(s, paths, c, cfg["transition"]) for c in candidates for s in scenarios]
+    res = run_many(_eval, specs, jobs, progress)
+    out = []
+    for k in range(len(candidates)):
+        per = {}
+        for j, s in enumerate(scenarios):
+            m = res[k * len(scenarios) + j]
+            per[s["name"]] = {**_brief(m), "cost": round(scenario_cost(m, v1, cfg["objective"]), 4)}
+        out.append({"scenarios": per, "objective": round(sum(p["cost"] for p in per.values()), 4)})
+    return out
+
+
+def search(out_dir: str | Path, generations: int | None = None, popsize: int | None = None, seed: int = 1,
+           jobs: int | None = None, resume: bool = False, quick: bool = False, config: str | None = None,
+           log=print) -> dict:
+    """Run (or continue, ``resume``) the CMA-ES search up to ``generations``; returns the best so far."""
+    import cma
+
+    from cpg_walker.progress import Progress
+
+    cfg = load_config(config, quick)
+    gens = int(cfg["cma"]["generations"] if generations is None else generations)
+    pop = int(cfg["cma"]["popsize"] if popsize is None else popsize)
+    if gens < 1 or pop < 2:
+        raise ValueError(f"--generations must be >= 1 and --popsize >= 2, got {gens}, {pop}")
+    out = Path(out_dir)
+    space = Space(cfg["fields"])
+    state_file, trials = out / "state.pkl", out / "trials.jsonl"
+    setup = {"fields": cfg["fields"], "pathways": list(_pathways(cfg)), "popsize": pop, "seed": seed,
+             "scenarios": cfg["scenarios"], "objective": cfg["objective"]}
+    if resume:
+        if not state_file.is_file():
+            raise FileNotFoundError(f"--resume: no saved search in {out} (state.pkl)")
+        st = pickle.loads(state_file.read_bytes())
+        if st["setup"] != setup:
+            diff = sorted(k for k in setup if st["setup"].get(k) != setup[k])
+            raise ValueError(f"--resume: the saved search in {out} differs in {diff}; use another --out")
+        es, gen, best = st["es"], st["generation"], st["best"]
+        np.random.set_state(st["np_random"])
+        if trials.is_file():  # drop a generation that was cut short
+            keep = [ln for ln in trials.read_text().splitlines() if ln and json.loads(ln)["generation"] < gen]
+            trials.write_text("".join(x + "\n" for x in keep))
+        log(f"feedback-search: resuming after generation {gen} (best objective {best['objective']})")
+    else:
+        if state_file.exists() or trials.exists():
+            raise ValueError(f"{out} already holds a search; pass --resume to continue it, or another --out")
+        out.mkdir(parents=True, exist_ok=True)
+        x0 = np.clip(space.normalise(asdict(FeedbackConfig.load())), 0.05, 0.95)
+        es = cma.CMAEvolutionStrategy(x0.tolist(), float(cfg["cma"]["sigma0"]),
+                                      {"seed": seed, "popsize": pop, "bounds": [0.0, 1.0], "verbose": -9})
+        gen, best = 0, {"objective": math.inf}
+        (out / "setup.json").write_text(json.dumps(setup, indent=1) + "\n")
+    v1 = _reference_speed(out, cfg, jobs)
+    while gen < gens:
+        us = es.ask()
+        cands = [space.values(np.asarray(u)) for u in us]
+        progress = Progress(len(cands) * len(cfg["scenarios"]), f"generation {gen + 1}/{gens}", unit="walks")
+        res = evaluate(cands, cfg["scenarios"], cfg, v1, jobs, progress)
+        progress.close()
+        es.tell(us, [r["objective"] for r in res])
+        with trials.open("a") as fh:
+            for k, (c, r) in enumerate(zip(cands, res, strict=True)):
+                fh.write(json.dumps({"generation": gen, "candidate": k, "params": c, **r}) + "\n")
+                if r["objective"] < best["objective"]:
+                    best = {"objective": r["objective"], "generation": gen, "candidate": k, "params": c,
+                            "scenarios": r["scenarios"]}
+        gen += 1
+        state_file.write_bytes(pickle.dumps({"setup": setup, "es": es, "generation": gen, "best": best,
+                                             "np_random": np.random.get_state()}))
+        write_best(out / "best.yaml", best, setup)
+        objs = sorted(r["objective"] for r in res)
+        log(f"generation {gen}/{gens}: objective best {objs[0]:.2f}, median {objs[len(objs) // 2]:.2f}; "
+            f"best so far {best['objective']:.2f} (v1 = {v1:.4f} m/s)")
+    return best
+
+
+def write_best(path: Path, best: dict, setup: dict) -> None:
+    import yaml
+
+    head = (f"# best gains of cpg-walker feedback-search (objective {best['objective']}, generation "
+            f"{best['generation']}, candidate {best['candidate']}, seed {setup['seed']}, pathways "
+            f"{','.join(setup['pathways'])}); a config/feedback.yaml fragment\n")
+    body = yaml.safe_dump({k: round(v, 6) for k, v in best["params"].items()}, sort_keys=False)
+    path.write_text(head + body)
+
+
+def read_best(path: Path) -> dict:
+    import yaml
+
+    d = yaml.safe_load(path.read_text(encoding="utf-8"))
+    if not isinstance(d, dict):
+        raise ValueError(f"{path}: expected a mapping of FeedbackConfig fields")
+    FeedbackConfig.load(**d)  # validates names and values
+    return d
+
+
+def holdout(out_dir: str | Path, jobs: int | None = None, quick: bool = False, config: str | None = None,
+            best_file: str | None = None) -> dict:
+    """Walk the best gains (DIR/best.yaml), config/feedback.yaml's defaults and the open loop on the
+    searched and the held-out scenarios; DIR/holdout.json and holdout.md, side by side."""
+    from cpg_walker.progress import Progress
+
+    cfg = load_config(config, quick)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    best = read_best(Path(best_file) if best_file else out / "best.yaml")
+    v1 = _reference_speed(out, cfg, jobs)
+    scen = [*cfg["scenarios"], *cfg["holdout"]]
+    cands = {"off": None, "default": {}, "best": best}
+    progress = Progress(len(cands) * len(scen), "holdout", unit="walks")
+    res = evaluate(list(cands.values()), scen, cfg, v1, jobs, progress)
+    progress.close()
+    searched = {s["name"] for s in cfg["scenarios"]}
+    report = {"v1_mps": v1, "best": best, "pathways": list(_pathways(cfg)), "rows": []}
+    for s in scen:
+        row = {"scenario": s["name"], "set": "searched" if s["name"] in searched else "held-out", "spec": s}
+        for name, r in zip(cands, res, strict=True):
+            row[name] = r["scenarios"][s["name"]]
+        report["rows"].append(row)
+    for name, r in zip(cands, res, strict=True):
+        costs = {s["name"]: r["scenarios"][s["name"]]["cost"] for s in scen}
+        report[f"objective_{name}"] = {
+            "searched": round(sum(v for k, v in costs.items() if k in searched), 3),
+            "held-out": round(sum(v for k, v in costs.items() if k not in searched), 3)}
+    (out / "holdout.json").write_text(json.dumps(report, indent=1) + "\n")
+    (out / "holdout.md").write_text(holdout_markdown(report, list(cands)))
+    return report
+
+
+def _cell(m: dict) -> str:
+    if "error" in m:
+        return "error"
+    if m["fell"]:
+        return f"F +{m['fall_time_s'] - m['t_cmd_s']:.1f}s"
+    return f"{m['steady_speed_mps']:+.3f} m/s {m['heading_change_deg']:+.0f}° {m['lateral_drift_m']:+.2f} m"
+
+
+def holdout_markdown(report: dict, names: list[str]) -> str:
+    lines = ["# feedback-search: searched vs held-out", "",
+             f"v1 (open-loop ζ = 1 speed) = {report['v1_mps']} m/s; pathways "
+             f"{', '.join(report['pathways'])}; cell: F +t = fell t s after the command, else speed (2nd "
+             "half), heading change, lateral drift; (cost).", "",
+             "| scenario | set | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
+    for row in report["rows"]:
+        lines.append(f"| {row['scenario']} | {row['set']} | "
+                     + " | ".join(f"{_cell(row[n])} ({row[n]['cost']:.1f})" for n in names) + " |")
+    lines += ["", "| objective (sum) | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for st in ("searched", "held-out"):
+        lines.append(f"| {st} | " + " | ".join(str(report[f"objective_{n}"][st]) for n in names) + " |")
+    lines += ["", "best gains: " + json.dumps(report["best"]), ""]
+    return "\n".join(lines)
