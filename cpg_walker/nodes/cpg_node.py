@@ -673,7 +673,8 @@ class CPGNode(Node):
         timing = self.timing.summary()
         fb = self.source.fb
         feedback = {"enabled": self.fb_enabled, "state": self.fb_state, "weight": self.fade.weight,
-                    "pathways": list(fb.pathways), "phase_resets": len(fb.resets), **self.sensor_stats}
+                    "pathways": list(fb.pathways), "phase_resets": len(fb.resets),
+                    "phase_reset_times_s": [round(t, 3) for t, _ in fb.resets[:100]], **self.sensor_stats}
         exit_log(self, "stats " + json.dumps({**self.activity.summary(), "overruns": timing["overruns"],
                                               "tick": timing, "gc": gc_summary(self),
                                               "horizon_work": latency_summary(self.horizon_work),
