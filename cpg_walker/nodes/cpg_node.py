@@ -301,7 +301,7 @@ class CPGNode(Node):
         self.tick_ns: int | None = None  # the smallest step seen between /clock ticks
         self.state_msg = Float64MultiArray(layout=state_layout(self.ctrl.names, self.ctrl.net.N))
         self.activity = ActivityStats()
-        self.monitor_due: tuple[int, np.ndarray] | None = None
+        self.monitor_due: tuple[int, np.ndarray, dict[str, str]] | None = None
         self.idle = self._idle
         self.throttle = Throttle(1.0)
         self.imu = SensorBuffer()
