@@ -69,6 +69,7 @@ from cpg_walker.nodes.runtime import (
     strs_param,
 )
 from cpg_walker.nodes.validation import check_finite_scalar, reason_key, to_ns, validate_imu, validate_load
+from cpg_walker.walker import feedback as feedback_core
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE, HumanoidCPG, modulation_error
 from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig, FeedbackController
 from cpg_walker.walker.gait_source import FeedbackGaitSource, _smootherstep
@@ -96,7 +97,8 @@ publishes:
 parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N when learning; 0 = the
   learning settings'), zeta [-2, 2] and alpha [0, 2] (settable at run time), lookahead, monitor_period
   (sim s), horizon and horizon_step (sim s; horizon 0 = no /joint_trajectory), realtime_priority, nice,
-  cpu_affinity (OS scheduling); feedback (bool), feedback_pathways (names from walker/feedback.py),
+  cpu_affinity (OS scheduling); feedback (bool), feedback_pathways (names from walker/feedback.py; default:
+  the feedback core's),
   feedback.<field> for every FeedbackConfig field (defaults: config/feedback.yaml), sensor_timeout and
   feedback_fade (sim s), sensor_wait (wall s) - all settable at run time, validated; lockstep (wait for
   each tick's sensor samples)"""
@@ -136,7 +138,8 @@ def configure(fb: FeedbackController, cfg: FeedbackConfig, pathways: tuple[str, 
 
 
 def pathway_list(value: object) -> tuple[str, ...]:
-    """``feedback_pathways`` as a tuple of known, distinct names, else ValueError with the reason."""
+    """``feedback_pathways`` as a tuple of known, distinct names, else ValueError with the reason (the
+    feedback core's ``check_pathways`` where it has one: its rules too)."""
     names = [str(v) for v in (value or [])]
     if not names:
         raise ValueError(f"feedback_pathways must name at least one of {list(PATHWAYS)} (feedback false: "
@@ -146,7 +149,15 @@ def pathway_list(value: object) -> tuple[str, ...]:
         raise ValueError(f"unknown feedback pathway(s) {bad}; choose from {list(PATHWAYS)}")
     if len(set(names)) != len(names):
         raise ValueError(f"feedback_pathways names a pathway twice: {names}")
-    return tuple(names)
+    check = getattr(feedback_core, "check_pathways", None)
+    return tuple(check(names)) if check is not None else tuple(names)
+
+
+def default_pathway_names() -> tuple[str, ...]:
+    """The pathways ``feedback_pathways`` defaults to: the feedback core's default (config/feedback.yaml's
+    ``pathways``, the one home) where it has one, else all of PATHWAYS."""
+    default = getattr(feedback_core, "default_pathways", None)
+    return tuple(default()) if default is not None else PATHWAYS
 
 
 def config_fields() -> dict[str, type]:
@@ -342,8 +353,11 @@ class CPGNode(Node):
             "lockstep pacing)", read_only=True)))
         self.fb_enabled = bool(declare(self, "feedback", bool_param(
             "close the sensory feedback pathways (false: the open-loop CPG)")))
-        pathways = pathway_list(declare(self, "feedback_pathways", strs_param(
-            f"feedback pathways in use, any of {', '.join(PATHWAYS)}")))
+        packaged = packaged_parameters(self)  # a bare start: the packaged params file's overrides
+        descriptor = strs_param(f"feedback pathways in use, any of {', '.join(PATHWAYS)}")
+        self.declare_parameter("feedback_pathways", list(packaged.get("feedback_pathways",
+                                                                      default_pathway_names())), descriptor)
+        pathways = pathway_list(self.get_parameter("feedback_pathways").value)
         timeout = check_finite_scalar("sensor_timeout", declare(self, "sensor_timeout", float_param(
             "sim s without a newer /imu or /foot_load sample before feedback fades out", 1e-3, 10.0)),
             1e-3, 10.0)
@@ -355,7 +369,6 @@ class CPGNode(Node):
             1e-3, 60.0)), 1e-3, 60.0)
         self.fade = FeedbackFade(fade, timeout)
         defaults = FeedbackConfig.load()
-        packaged = packaged_parameters(self)  # a bare start: the packaged params file's overrides
         self.fb_fields: dict[str, type] = {}
         for name, kind in config_fields().items():
             make = FIELD_PARAMS.get(kind)
