@@ -32,7 +32,8 @@ def nodes(context) -> list:
     """The three nodes, each with its file, then the given launch arguments as overrides."""
     arg = {name: context.launch_configurations.get(name, "") for name in ("pacing", "zeta", "alpha")}
     pacing = arg["pacing"] or file_value("sim", "pacing")
-    cpg = {"use_sim_time": True, **{k: float(arg[k]) for k in ("zeta", "alpha") if arg[k]}}
+    cpg = {"use_sim_time": True, "lockstep": pacing == "lockstep",
+           **{k: float(arg[k]) for k in ("zeta", "alpha") if arg[k]}}
     return [
         Node(package="cpg_walker", executable="sim_node", name="sim", output="screen",
              parameters=[params("sim"), {"use_sim_time": True, "pacing": pacing}]),

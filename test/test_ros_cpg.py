@@ -82,13 +82,15 @@ def test_targets_state_and_diagnostics_published(graph, probe):
 
 
 def test_60s_lockstep_walk_is_deterministic(tmp_path, ros_domain):
-    """60 s through sim_node + pid_node + cpg_node without a fall; a second, 20 s run reproduces the
-    first 20 s of it bit for bit (lockstep: every period's inputs are fixed by the stamps). However slowly
-    the machine runs it: the watchdog only ends a run whose sim time stops advancing."""
+    """60 s through sim_node + pid_node + cpg_node (feedback off: the open-loop CPG; with feedback:
+    test_ros_feedback.py) without a fall; a second, 20 s run reproduces the first 20 s of it bit for bit
+    (lockstep: every period's inputs are fixed by the stamps). However slowly the machine runs it: the
+    watchdog only ends a run whose sim time stops advancing."""
     from cpg_walker.experiments.walk_graph import run_graph_walk
 
     with SimWatchdog(ros_domain):
-        report = run_graph_walk(tmp_path / "walk60", duration=60.0, timeout=sim_deadline(60.0))
+        report = run_graph_walk(tmp_path / "walk60", duration=60.0, feedback=False,
+                                timeout=sim_deadline(60.0))
     assert not report["fell"] and report["duration_s"] == pytest.approx(60.0, abs=0.02), report
     assert report["distance_m"] > 3.0, report  # 4.96 m measured; the recording's pace is ~0.075 m/s
     assert report["steps"] >= 40, report  # ~2 steps per 2.51 s stride
@@ -99,7 +101,7 @@ def test_60s_lockstep_walk_is_deterministic(tmp_path, ros_domain):
                                   .read_text())[-1])["tick"]
     assert stats["ticks"] == 30000  # one per control period (its wall timing: the benchmark's graph section)
     with SimWatchdog(ros_domain):
-        run_graph_walk(tmp_path / "walk20", duration=20.0, timeout=sim_deadline(20.0))
+        run_graph_walk(tmp_path / "walk20", duration=20.0, feedback=False, timeout=sim_deadline(20.0))
     long, short = (json.loads((tmp_path / d / "graph_record.json").read_text()) for d in ("walk60", "walk20"))
     n = len(short["t"])
     assert n >= 2000 and short["t"] == long["t"][:n]

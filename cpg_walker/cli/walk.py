@@ -1,5 +1,7 @@
-"""`cpg-walker walk --duration S --zeta Z --alpha A [--feedback off] --out DIR`: the learned CPG walking
-the simulated HOAP-2 through the ROS graph (sim_node + pid_node + cpg_node); writes DIR/walk.json."""
+"""`cpg-walker walk --duration S --zeta Z --alpha A --feedback on|off [--schedule "T,Z,A;T,Z,A"] --out DIR`:
+the learned CPG walking the simulated HOAP-2 through the ROS graph (sim_node + pid_node + cpg_node);
+writes DIR/walk.json. The schedule's changes go through cpg_node's SetParameters service at those sim
+times (experiments/walk_graph.py)."""
 
 from __future__ import annotations
 
@@ -19,8 +21,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--alpha", type=float, default=None, metavar="A",
                    help="amplitude (step length) scale, in [{:g}, {:g}] (default: cpg_node's, "
                         "config/cpg.yaml)".format(*ALPHA_RANGE))
-    p.add_argument("--feedback", choices=("on", "off"), default="off",
-                   help="sensory feedback (eqs 14-20): not in cpg_node yet (in-process: cpg-walk --feedback)")
+    p.add_argument("--feedback", choices=("on", "off"), default=None,
+                   help="cpg_node's sensory feedback pathways (default: its 'feedback', config/cpg.yaml)")
+    p.add_argument("--schedule", default=None, metavar="T,Z,A;...",
+                   help="(sim s, zeta, alpha) changes, sent through cpg_node's SetParameters service when "
+                        "the sim reaches each time (as 'cpg-walker param set /cpg zeta Z' would)")
     p.add_argument("--cpg-file", default=None, metavar="FILE",
                    help="learned CPG YAML (default: cpg_node's cpg_file, config/cpg.yaml; '' = cpg_node "
                         "learns it)")
@@ -32,15 +37,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     import json
 
-    from cpg_walker.cli.main import UserError
+    from cpg_walker.experiments.walk_graph import parse_schedule, run_graph_walk
 
-    if args.feedback == "on":
-        raise UserError("--feedback on: cpg_node does not close the feedback pathways yet; the in-process "
-                        "walk does (cpg-walker cpg-walk --feedback on)")
-    from cpg_walker.experiments.walk_graph import run_graph_walk
-
+    schedule = parse_schedule(args.schedule) if args.schedule else None  # ValueError: a user error
+    feedback = None if args.feedback is None else args.feedback == "on"
     report = run_graph_walk(args.out, duration=args.duration, zeta=args.zeta, alpha=args.alpha,
-                            cpg_file=args.cpg_file, pacing=args.pacing)
+                            cpg_file=args.cpg_file, feedback=feedback, schedule=schedule, pacing=args.pacing)
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps",
             "lateral_drift_m", "heading_change_deg", "zeta", "alpha", "feedback", "real_time_factor")
     print(json.dumps({k: report[k] for k in keys}))

@@ -3,15 +3,25 @@
 cpg_node streams the learned CPG as /joint_targets on every /clock tick (the recording's opening steps,
 then the CPG), pid_node closes the loop over /joint_states -> /joint_torques, sim_node steps the HOAP-2
 and records the run. Run and summarised by the graph replay's code (experiments/replay_graph.py), so
-walk.json has replay.json's keys plus ``zeta``, ``alpha``, ``feedback``, ``real_time_factor`` and the CPG
-facts. Every node gets its parameters file (config/<node>.yaml); ``zeta``/``alpha``/``cpg_file`` None
-leave cpg_node's values from config/cpg.yaml.
+walk.json has replay.json's keys (``heading_change_deg`` among them) plus ``zeta``, ``alpha``,
+``feedback``, ``real_time_factor``, the CPG facts and the ``schedule`` as it landed. Every node gets its
+parameters file (config/<node>.yaml); ``zeta``/``alpha``/``feedback``/``cpg_file`` None leave cpg_node's
+values from config/cpg.yaml.
+
+A ``schedule`` of (t, zeta, alpha) changes goes through cpg_node's SetParameters service (the one
+``ros2 param set`` / ``cpg-walker param set`` call), sent from this process once /clock reaches t: one
+request with both values, so they land on the same tick. The sim runs on during the service's round
+trip, so a change lands a little after t (the sim time it took effect is in walk.json, from cpg_node's
+log); in lockstep the landing tick depends on the machine's timing (the rest of the run does not).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import re
+import threading
+import time
 from pathlib import Path
 
 from cpg_walker.walker.learning import cpg_defaults
@@ -30,19 +40,129 @@ def check_modulation(zeta: float, alpha: float) -> None:
             raise ValueError(reason)
 
 
+def parse_schedule(text: str) -> list[tuple[float, float, float]]:
+    """``"T,Z,A;T,Z,A"`` -> [(t sim s, zeta, alpha), ...] sorted by t; ValueError naming a bad item."""
+    out = []
+    for item in text.split(";"):
+        if not item.strip():
+            continue
+        parts = item.split(",")
+        try:
+            t, z, a = (float(x) for x in parts)
+        except ValueError:
+            raise ValueError(f"--schedule item {item!r}: expected 'time,zeta,alpha' (three numbers)") \
+                from None
+        if not (t >= 0 and math.isfinite(t)):
+            raise ValueError(f"--schedule item {item!r}: the time must be >= 0 sim s")
+        check_modulation(z, a)
+        out.append((t, z, a))
+    return sorted(out)
+
+
+class ParameterSchedule:
+    """Sends each (t, zeta, alpha) to /cpg/set_parameters when /clock reaches t, from a thread with its own
+    rclpy context on the graph's domain; ``sent`` records (t, the /clock time it was sent at, accepted,
+    the node's reason)."""
+
+    def __init__(self, domain_id: int, schedule: list[tuple[float, float, float]]):
+        self.domain_id, self.todo = domain_id, list(schedule)
+        self.sent: list[dict] = []
+        self.error: str | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="cpg-schedule", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=30.0)
+
+    def _run(self) -> None:
+        import rclpy
+        from rcl_interfaces.msg import Parameter
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+        from rosgraph_msgs.msg import Clock
+
+        from cpg_walker.nodes.rostools import to_parameter_value
+
+        ctx = rclpy.Context()
+        rclpy.init(context=ctx, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        node = rclpy.create_node("walk_schedule", context=ctx, start_parameter_services=False)
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        clock = [-1.0]
+        node.create_subscription(Clock, "/clock", lambda m: clock.__setitem__(
+            0, max(clock[0], m.clock.sec + m.clock.nanosec * 1e-9)), 100)
+        client = node.create_client(SetParameters, "/cpg/set_parameters")
+        pending = None
+        try:
+            while not self._stop.is_set() and (self.todo or pending is not None):
+                executor.spin_once(timeout_sec=0.005)
+                if pending is not None:
+                    if pending[1].done():
+                        results = pending[1].result().results
+                        ok = all(r.successful for r in results)
+                        self.sent.append({**pending[0], "accepted": ok,
+                                          "reason": "; ".join(r.reason for r in results if r.reason)})
+                        pending = None
+                    continue
+                t, z, a = self.todo[0]
+                if clock[0] >= t and client.service_is_ready():
+                    self.todo.pop(0)
+                    req = SetParameters.Request(parameters=[
+                        Parameter(name="zeta", value=to_parameter_value(float(z))),
+                        Parameter(name="alpha", value=to_parameter_value(float(a)))])
+                    pending = ({"t_s": t, "zeta": z, "alpha": a, "sent_at_sim_s": round(clock[0], 4),
+                                "sent_wall": time.time()}, client.call_async(req))
+        except Exception as exc:  # reported in walk.json; the walk itself goes on
+            self.error = f"{type(exc).__name__}: {exc}"
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+            rclpy.try_shutdown(context=ctx)
+
+
+#: cpg_node's log line for a modulation command (nodes/cpg_node.py ``_command``).
+COMMANDED = re.compile(r"commanded zeta=(\S+), alpha=(\S+) after sim ([\d.]+) s")
+
+
+def landed(schedule: list[dict], cpg_log: str) -> list[dict]:
+    """The schedule's entries with ``applied_after_sim_s``: the sim time of the tick after which cpg_node
+    applied each (the first of its log lines, after the previous entry's, with both values: rclpy calls
+    the node's parameter callback once per parameter of a request, so a request logs one line each)."""
+    lines = [(float(z), float(a), float(t)) for z, a, t in COMMANDED.findall(cpg_log)]
+    out, i = [], 0
+    for entry in schedule:
+        item = {k: v for k, v in entry.items() if k != "sent_wall"}
+        if entry["accepted"]:
+            j = next((j for j in range(i, len(lines))
+                      if lines[j][:2] == (float(entry["zeta"]), float(entry["alpha"]))), None)
+            if j is not None:
+                item["applied_after_sim_s"] = lines[j][2]
+                i = j + 1
+        out.append(item)
+    return out
+
+
 def run_graph_walk(
     out_dir: str | Path,
     duration: float = 60.0,
     zeta: float | None = None,
     alpha: float | None = None,
     cpg_file: str | None = None,
+    feedback: bool | None = None,
+    schedule: list[tuple[float, float, float]] | None = None,
     pacing: str = "lockstep",
     control_period: float | None = None,
     stop_on_fall: bool = True,
     timeout: float | None = None,
 ) -> dict:
     """Walk through sim_node + pid_node + cpg_node; write ``walk.json``; return its content. ``zeta``,
-    ``alpha``, ``cpg_file`` None: cpg_node's own (config/cpg.yaml), not passed on."""
+    ``alpha``, ``feedback``, ``cpg_file`` None: cpg_node's own (config/cpg.yaml), not passed on.
+    ``schedule``: (t, zeta, alpha) changes sent through cpg_node's SetParameters service (module doc)."""
     from cpg_walker.experiments.replay_graph import run_graph
     from cpg_walker.nodes.runtime import PACINGS
     from cpg_walker.walker.learning import load_controller
@@ -52,8 +172,16 @@ def run_graph_walk(
     if not (duration > 0 and math.isfinite(duration)):
         raise ValueError(f"--duration must be a positive number of seconds, got {duration}")
     defaults = cpg_defaults()
-    overrides = {name: float(value) for name, value in (("zeta", zeta), ("alpha", alpha))
-                 if value is not None}
+    overrides: dict[str, object] = {name: float(value) for name, value in (("zeta", zeta), ("alpha", alpha))
+                                    if value is not None}
+    if feedback is not None:
+        overrides["feedback"] = bool(feedback)
+    feedback = bool(defaults["feedback"]) if feedback is None else bool(feedback)
+    schedule = sorted(schedule or [])
+    for t, z, a in schedule:
+        check_modulation(z, a)
+        if not 0 <= t < duration:
+            raise ValueError(f"schedule time {t:g} s is outside the walk (0 to {duration:g} sim s)")
     zeta, alpha = (float(defaults[name]) if value is None else value
                    for name, value in (("zeta", zeta), ("alpha", alpha)))
     check_modulation(zeta, alpha)
@@ -65,17 +193,37 @@ def run_graph_walk(
         cpg_file = str(Path(origin).resolve())
     out = Path(out_dir)
     limit = timeout if timeout is not None else 60.0 + duration * 5.0 + (LEARN_WAIT_S if learn_now else 0.0)
-    run = run_graph(out, "cpg_node", {"cpg_file": cpg_file, **overrides},
-                    duration=duration, pacing=pacing, control_period=control_period,
-                    stop_on_fall=stop_on_fall, timeout=limit,
-                    pid_params={"startup_wait": LEARN_WAIT_S} if learn_now else None)
+    changes: list[ParameterSchedule] = []
+
+    def attach(graph) -> list:
+        if schedule:
+            changes.append(ParameterSchedule(graph.domain_id, schedule))
+            changes[0].start()
+        return []
+
+    try:
+        cpg_params = {"cpg_file": cpg_file, "lockstep": pacing == "lockstep", **overrides}
+        run = run_graph(out, "cpg_node", cpg_params, duration=duration, pacing=pacing,
+                        control_period=control_period, stop_on_fall=stop_on_fall, timeout=limit,
+                        pid_params={"startup_wait": LEARN_WAIT_S} if learn_now else None, attach=attach)
+    finally:
+        for c in changes:
+            c.stop()
     period = ctrl.period / abs(zeta) if ctrl is not None and zeta else None
     metrics, _ = run.report(period_s=period)
     report = {
         **metrics,
-        "zeta": zeta, "alpha": alpha, "feedback": False,
+        "zeta": zeta, "alpha": alpha, "feedback": feedback,
         "n_oscillators": int(ctrl.net.N) if ctrl is not None else None,
         "cpg_file": cpg_file or "learned at start-up",
     }
+    cpg_stats = re.findall(r"stats (\{.*\})", run.logs.get("cpg_node", ""))
+    if cpg_stats:
+        report["cpg_feedback"] = json.loads(cpg_stats[-1]).get("feedback")
+    if schedule:
+        report["schedule"] = landed(changes[0].sent, run.logs.get("cpg_node", ""))
+        report["schedule_unsent"] = [list(x) for x in changes[0].todo]
+        if changes[0].error:
+            report["schedule_error"] = changes[0].error
     (out / "walk.json").write_text(json.dumps(report, indent=2) + "\n")
     return report

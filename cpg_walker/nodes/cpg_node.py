@@ -9,27 +9,50 @@ Every ``horizon_step`` of sim time it also publishes the next ``horizon`` second
 pid_node follows when the live targets are late; the live targets are unaffected by it. Its points are
 at every tick until the next message is due (a target late by a few ticks is then on a point: what the
 tick would have sent), then every ``horizon_step``.
+
+Sensory feedback (``feedback``, walker/feedback.py through ``FeedbackGaitSource``): the node subscribes
+/imu and /foot_load/{left,right} and, on every new tick t, feeds the samples to the source
+(``observe``) before it computes the tick's targets. In ``lockstep`` it waits for the samples stamped t
+(up to ``sensor_wait`` wall s), so the target stamped t + period depends on the state stamped t only
+(bit-reproducible); otherwise it takes the newest samples. Stale or missing samples (none newer than
+``sensor_timeout`` sim s) fade the pathways' weight out over ``feedback_fade`` sim s (`FeedbackFade`),
+and back in when samples return; malformed ones are dropped with a throttled warning. The horizon's
+forecast holds the feedback g of the last step (`CPGNetwork.forecast`) and foresees no reset.
 """
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import time
+from collections import deque
+from dataclasses import asdict, fields
+from typing import get_type_hints
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 from trajectory_msgs.msg import JointTrajectory
 
-from cpg_walker.nodes.messages import JointStateBuilder, JointTrajectoryBuilder, darray, stamp
+from cpg_walker.nodes.messages import (
+    FOOT_LOAD_FRAMES,
+    IMU_FRAME,
+    JointStateBuilder,
+    JointTrajectoryBuilder,
+    darray,
+    stamp,
+    stamp_ns,
+)
 from cpg_walker.nodes.runtime import (
     ActivityStats,
     HotPath,
+    Throttle,
     TickStats,
     bool_param,
     declare,
@@ -39,19 +62,25 @@ from cpg_walker.nodes.runtime import (
     gc_summary,
     int_param,
     latency_summary,
+    packaged_parameters,
     parse_cli,
     run_main,
     str_param,
+    strs_param,
 )
-from cpg_walker.nodes.validation import to_ns
+from cpg_walker.nodes.validation import check_finite_scalar, reason_key, to_ns, validate_imu, validate_load
+from cpg_walker.walker import feedback as feedback_core
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE, HumanoidCPG, modulation_error
-from cpg_walker.walker.gait_source import CPGGaitSource
+from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig, FeedbackController
+from cpg_walker.walker.gait_source import FeedbackGaitSource, _smootherstep
 from cpg_walker.walker.learning import load_controller
 
 STATE_FIELDS = ("phase_rad", "frequency_hz", "amplitude_rad")
 
 INTERFACE = """\
-subscribes: /clock (rosgraph_msgs/Clock)
+subscribes: /clock (rosgraph_msgs/Clock), /imu (sensor_msgs/Imu, frame 'imu': orientation + angular
+  velocity), /foot_load/left and /foot_load/right (geometry_msgs/WrenchStamped, sole frames: force.z =
+  sole load N) - the sensors of the feedback pathways, on sim time
 publishes:
   /joint_targets (sensor_msgs/JointState): position + velocity of all 25 joints (the 10 CPG DOFs; the
     others follow the recording, then hold its mean), stamped with the tick (and with lookahead the next)
@@ -63,11 +92,132 @@ publishes:
     all 25 joints (positions, velocities) at stamp + every tick period up to horizon_step, then
     every horizon_step up to horizon (the forecast)
   /diagnostics (diagnostic_msgs/DiagnosticArray, every monitor_period): status 'cpg_walker/cpg' with
-    state (learning | converged | starting | walking), zeta, alpha (commanded and applied), N, overruns
+    state (learning | converged | starting | walking), zeta, alpha (commanded and applied), N, overruns,
+    feedback (off | active | fading | stale), feedback_weight, sensor_age_s, sensors_dropped
 parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N when learning; 0 = the
   learning settings'), zeta [-2, 2] and alpha [0, 2] (settable at run time), lookahead, monitor_period
   (sim s), horizon and horizon_step (sim s; horizon 0 = no /joint_trajectory), realtime_priority, nice,
-  cpu_affinity (OS scheduling)"""
+  cpu_affinity (OS scheduling); feedback (bool), feedback_pathways (names from walker/feedback.py; default:
+  the feedback core's),
+  feedback.<field> for every FeedbackConfig field (defaults: config/feedback.yaml), sensor_timeout and
+  feedback_fade (sim s), sensor_wait (wall s) - all settable at run time, validated; lockstep (wait for
+  each tick's sensor samples)"""
+
+#: Sensor samples kept per topic, by stamp (lockstep takes the one stamped like its tick).
+SENSOR_KEEP = 32
+#: FeedbackConfig field types exposed as ROS parameters, and their parameter descriptors' makers.
+FIELD_PARAMS = {float: float_param, str: str_param, bool: bool_param}
+
+
+def observe(source: FeedbackGaitSource, t: float, quat_wxyz: np.ndarray, gyro: np.ndarray,
+            loads: tuple[float, float]) -> None:
+    """One tick's sensor samples to the source: ``observe(t, quat_wxyz, gyro, loads)`` (the feedback
+    core's interface); a core that still takes ``observe(t, tilt, loads)`` gets the (roll, pitch) tilt of
+    the orientation (robot.hoap2.tilt_from_quat). The one place that knows both."""
+    if _QUAT_OBSERVE:
+        source.observe(t, quat_wxyz, gyro, loads)
+    else:
+        from cpg_walker.robot.hoap2 import tilt_from_quat
+
+        source.observe(t, tilt_from_quat(quat_wxyz), loads)
+
+
+_QUAT_OBSERVE = "gyro" in inspect.signature(FeedbackGaitSource.observe).parameters
+
+
+def configure(fb: FeedbackController, cfg: FeedbackConfig, pathways: tuple[str, ...]) -> None:
+    """Give a running FeedbackController new constants and pathways between ticks (its ``set_config`` /
+    ``set_pathways`` where the core has them)."""
+    if hasattr(fb, "set_config") and hasattr(fb, "set_pathways"):
+        fb.set_config(cfg)
+        fb.set_pathways(pathways)
+        return
+    if hasattr(fb, "tilt"):
+        fb.tilt.T = float(cfg.tilt_time_constant_s)
+    fb.cfg, fb.pathways = cfg, tuple(pathways)
+
+
+def pathway_list(value: object) -> tuple[str, ...]:
+    """``feedback_pathways`` as a tuple of known, distinct names, else ValueError with the reason (the
+    feedback core's ``check_pathways`` where it has one: its rules too)."""
+    names = [str(v) for v in (value or [])]
+    if not names:
+        raise ValueError(f"feedback_pathways must name at least one of {list(PATHWAYS)} (feedback false: "
+                         "none)")
+    bad = [n for n in names if n not in PATHWAYS]
+    if bad:
+        raise ValueError(f"unknown feedback pathway(s) {bad}; choose from {list(PATHWAYS)}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"feedback_pathways names a pathway twice: {names}")
+    check = getattr(feedback_core, "check_pathways", None)
+    return tuple(check(names)) if check is not None else tuple(names)
+
+
+def default_pathway_names() -> tuple[str, ...]:
+    """The pathways ``feedback_pathways`` defaults to: the feedback core's default (config/feedback.yaml's
+    ``pathways``, the one home) where it has one, else all of PATHWAYS."""
+    default = getattr(feedback_core, "default_pathways", None)
+    return tuple(default()) if default is not None else PATHWAYS
+
+
+def config_fields() -> dict[str, type]:
+    """FeedbackConfig's fields and their types (the ``feedback.<field>`` parameters)."""
+    hints = get_type_hints(FeedbackConfig)
+    return {f.name: hints.get(f.name, object) for f in fields(FeedbackConfig)}
+
+
+class FeedbackFade:
+    """The weight w in [0, 1] of the feedback pathways. A ramp u moves at 1/``fade_s`` per sim s towards 1
+    while feedback is on and the newest sensor sample is at most ``timeout_s`` sim s old, towards 0
+    otherwise (``fade_s`` 0: at once); w = 6u^5 - 15u^4 + 10u^3 (smootherstep: w, dw/dt continuous, flat
+    at both ends). Starts at 0: feedback fades in once the first samples are there."""
+
+    def __init__(self, fade_s: float, timeout_s: float) -> None:
+        self.fade_s, self.timeout_s = float(fade_s), float(timeout_s)
+        self.u = 0.0
+        self.weight = 0.0
+        self.fresh = False
+
+    def update(self, dt_s: float, enabled: bool, age_s: float | None) -> float:
+        """Advance by ``dt_s`` sim s; ``age_s``: the newest sample's age (None: no sample yet)."""
+        self.fresh = age_s is not None and age_s <= self.timeout_s
+        want = 1.0 if enabled and self.fresh else 0.0
+        if self.fade_s <= 0:
+            self.u = want
+        elif self.u < want:
+            self.u = min(want, self.u + dt_s / self.fade_s)
+        elif self.u > want:
+            self.u = max(want, self.u - dt_s / self.fade_s)
+        self.weight = _smootherstep(self.u)[0]
+        return self.weight
+
+    def state(self, enabled: bool) -> str:
+        """off (disabled, faded out) | active (on, fresh samples; fading in while w < 1) | fading (w > 0
+        going to 0: stale samples, or just turned off) | stale (on, no fresh samples, w = 0)."""
+        if enabled and self.fresh:
+            return "active"
+        if self.weight > 0:
+            return "fading"
+        return "stale" if enabled else "off"
+
+
+class SensorBuffer:
+    """The last SENSOR_KEEP samples of one sensor topic, by stamp (ns)."""
+
+    def __init__(self) -> None:
+        self.samples: dict[int, object] = {}
+        self.newest_ns: int | None = None
+
+    def add(self, t_ns: int, value: object) -> None:
+        self.samples[t_ns] = value
+        if self.newest_ns is None or t_ns > self.newest_ns:
+            self.newest_ns = t_ns
+        if len(self.samples) > SENSOR_KEEP:
+            del self.samples[min(self.samples)]
+
+    def newest(self) -> tuple[int, object] | None:
+        return None if self.newest_ns is None else (self.newest_ns, self.samples[self.newest_ns])
+
 
 #: The start-up warm-up commands this fraction of the current zeta/alpha (0.9 of 0 is 0: then this value
 #: itself), so the modulation filters move too while the compiled kernels load.
@@ -134,6 +284,7 @@ class CPGNode(Node):
             reason = modulation_error(name, value)
             if reason:
                 raise ValueError(reason)
+        fb_cfg, pathways = self._declare_feedback()
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.state_pub = self.create_publisher(Float64MultiArray, "/cpg/state", 10)
         self.pub = self.create_publisher(JointState, "/joint_targets", 10)
@@ -141,7 +292,9 @@ class CPGNode(Node):
         self.timing = TickStats()
         self.stage = "learning"
         self.ctrl, self.origin, self.converged = self._controller(cpg_file, n_osc or None)
-        self.source = CPGGaitSource(self.ctrl, zeta=zeta, alpha=alpha)
+        fb = FeedbackController(fb_cfg, pathways)
+        fb.weight = self.fade.weight
+        self.source = FeedbackGaitSource(self.ctrl, fb, zeta=zeta, alpha=alpha)
         self.walk_from_s = self.source.handover + self.source.blend
         self._warm_up()
         self.stage = "converged"
@@ -159,9 +312,24 @@ class CPGNode(Node):
         self.tick_ns: int | None = None  # the smallest step seen between /clock ticks
         self.state_msg = Float64MultiArray(layout=state_layout(self.ctrl.names, self.ctrl.net.N))
         self.activity = ActivityStats()
-        self.monitor_due: tuple[int, np.ndarray] | None = None
-        self.idle = self._flush_monitor
-        self.hot = HotPath(self, [self.create_subscription(Clock, "/clock", self._on_clock, 100)])
+        self.monitor_due: tuple[int, np.ndarray, dict[str, str]] | None = None
+        self.idle = self._idle
+        self.throttle = Throttle(1.0)
+        self.imu = SensorBuffer()
+        self.loads = [SensorBuffer() for _ in FOOT_LOAD_FRAMES]
+        self.buffers = [self.imu, *self.loads]
+        self.waiting: deque[tuple[int, float]] = deque()  # lockstep: ticks waiting for their samples
+        self.sensors_gave_up = False  # a lockstep wait timed out: no waiting until the samples catch up
+        self.sensor_stats = {"dropped": 0, "wait_timeouts": 0}
+        self.fb_state = self.fade.state(self.fb_enabled)
+        self.fb_age: float | None = None
+        subs = [self.create_subscription(Clock, "/clock", self._on_clock, 100),
+                self.create_subscription(Imu, "/imu", self._on_imu, 100)]
+        for i, (side, frame) in enumerate(FOOT_LOAD_FRAMES):
+            subs.append(self.create_subscription(
+                WrenchStamped, f"/foot_load/{side}",
+                lambda msg, i=i, frame=frame: self._on_load(i, frame, msg), 100))
+        self.hot = HotPath(self, subs)
         self._diagnostics(0)
         self.get_logger().info(f"CPG N={self.ctrl.net.N} from {self.origin}; recording's opening steps "
                                f"to {self.source.handover:.3f} s, CPG from {self.walk_from_s:.3f} s")
@@ -174,6 +342,56 @@ class CPGNode(Node):
             return load_controller(cpg_file, n if not cpg_file else None)
         except FileNotFoundError as exc:
             raise ValueError(str(exc)) from None
+
+    def _declare_feedback(self) -> tuple[FeedbackConfig, tuple[str, ...]]:
+        """The feedback parameters: ``lockstep``, ``feedback``, ``feedback_pathways``, ``sensor_timeout``,
+        ``feedback_fade``, ``sensor_wait`` (config/cpg.yaml), and ``feedback.<field>`` for every
+        FeedbackConfig field of a plain type, its default the value in config/feedback.yaml (the one
+        home; the node's parameters file may override it). Validated: ValueError with the reason."""
+        self.lockstep = bool(declare(self, "lockstep", bool_param(
+            "wait for the sensor samples stamped like each /clock tick (deterministic; with the sim's "
+            "lockstep pacing)", read_only=True)))
+        self.fb_enabled = bool(declare(self, "feedback", bool_param(
+            "close the sensory feedback pathways (false: the open-loop CPG)")))
+        packaged = packaged_parameters(self)  # a bare start: the packaged params file's overrides
+        descriptor = strs_param(f"feedback pathways in use, any of {', '.join(PATHWAYS)}")
+        self.declare_parameter("feedback_pathways", list(packaged.get("feedback_pathways",
+                                                                      default_pathway_names())), descriptor)
+        pathways = pathway_list(self.get_parameter("feedback_pathways").value)
+        timeout = check_finite_scalar("sensor_timeout", declare(self, "sensor_timeout", float_param(
+            "sim s without a newer /imu or /foot_load sample before feedback fades out", 1e-3, 10.0)),
+            1e-3, 10.0)
+        fade = check_finite_scalar("feedback_fade", declare(self, "feedback_fade", float_param(
+            "sim s over which feedback fades out (stale sensors, switched off) or back in", 0.0, 60.0)),
+            0.0, 60.0)
+        self.sensor_wait = check_finite_scalar("sensor_wait", declare(self, "sensor_wait", float_param(
+            "lockstep: wall s to wait for a tick's sensor samples before going on with the newest",
+            1e-3, 60.0)), 1e-3, 60.0)
+        self.fade = FeedbackFade(fade, timeout)
+        defaults = FeedbackConfig.load()
+        self.fb_fields: dict[str, type] = {}
+        for name, kind in config_fields().items():
+            make = FIELD_PARAMS.get(kind)
+            if make is None:
+                self.get_logger().warn(f"FeedbackConfig.{name} ({kind}) is not a ROS parameter: only "
+                                       f"{', '.join(t.__name__ for t in FIELD_PARAMS)} fields are")
+                continue
+            self.fb_fields[name] = kind
+            default = packaged.get(f"feedback.{name}", getattr(defaults, name))
+            self.declare_parameter(f"feedback.{name}", kind(default), make(
+                f"FeedbackConfig.{name} (walker/feedback.py; default in config/feedback.yaml)"))
+        values = {name: self._field_value(name, self.get_parameter(f"feedback.{name}").value)
+                  for name in self.fb_fields}
+        return FeedbackConfig.load(**values), pathways
+
+    def _field_value(self, name: str, value: object) -> object:
+        """A ``feedback.<name>`` value checked for its field's type (floats finite)."""
+        kind = self.fb_fields[name]
+        if kind is float:
+            return check_finite_scalar(f"feedback.{name}", value)
+        if not isinstance(value, kind):
+            raise ValueError(f"feedback.{name} must be a {kind.__name__}, got {type(value).__name__}")
+        return value
 
     def _warm_up(self) -> None:
         """Step a copy of the CPG (with the modulation filters moving) a few times: compiled kernels
@@ -196,13 +414,47 @@ class CPGNode(Node):
 
     # ---------------------------------------------------------------- parameters
     def _on_set(self, params) -> SetParametersResult:
-        changes = {}
+        """Validate every parameter of the request, then apply them all (between ticks: the callback runs
+        in the node's one thread). A refusal's reason names the parameter (FeedbackConfig's own reason
+        for a value it refuses)."""
+        changes: dict[str, float] = {}
+        fb_changes: dict[str, object] = {}
+        pathways = None
+        try:
+            for prm in params:
+                name, value = prm.name, prm.value
+                if name in ("zeta", "alpha"):
+                    reason = modulation_error(name, value)
+                    if reason:
+                        raise ValueError(reason)
+                    changes[name] = float(value)
+                elif name == "feedback_pathways":
+                    pathways = pathway_list(value)
+                elif name.startswith("feedback.") and name[len("feedback."):] in self.fb_fields:
+                    fb_changes[name[len("feedback."):]] = self._field_value(name[len("feedback."):], value)
+                elif name in ("sensor_timeout", "sensor_wait"):
+                    check_finite_scalar(name, value, 1e-3, 60.0 if name == "sensor_wait" else 10.0)
+                elif name == "feedback_fade":
+                    check_finite_scalar(name, value, 0.0, 60.0)
+            fb = self.source.fb
+            cfg = FeedbackConfig.load(**{**asdict(fb.cfg), **fb_changes}) if fb_changes else fb.cfg
+        except (ValueError, TypeError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        if fb_changes or pathways is not None:
+            configure(fb, cfg, pathways if pathways is not None else fb.pathways)
+            self.get_logger().info(f"feedback pathways {list(fb.pathways)}"
+                                   + (f"; {fb_changes}" if fb_changes else ""))
         for prm in params:
-            if prm.name in ("zeta", "alpha"):
-                reason = modulation_error(prm.name, prm.value)
-                if reason:
-                    return SetParametersResult(successful=False, reason=reason)
-                changes[prm.name] = float(prm.value)
+            if prm.name == "feedback":
+                self.fb_enabled = bool(prm.value)
+                self.get_logger().info(f"feedback {'on' if self.fb_enabled else 'off'} (fading "
+                                       f"{'in' if self.fb_enabled else 'out'} over {self.fade.fade_s:g} s)")
+            elif prm.name == "sensor_timeout":
+                self.fade.timeout_s = float(prm.value)
+            elif prm.name == "feedback_fade":
+                self.fade.fade_s = float(prm.value)
+            elif prm.name == "sensor_wait":
+                self.sensor_wait = float(prm.value)
         if changes:
             self._command(changes.get("zeta", self.get_parameter("zeta").value),
                           changes.get("alpha", self.get_parameter("alpha").value))
@@ -216,13 +468,117 @@ class CPGNode(Node):
         else:
             self.ctrl.set_zeta(zeta)
             self.ctrl.set_alpha(alpha)
-        self.get_logger().info(f"commanded zeta={zeta:g}, alpha={alpha:g}")
+        after = (self.last_tick_ns or 0) / 1e9 if src._t_net >= self.walk_from_s else self.walk_from_s
+        self.get_logger().info(f"commanded zeta={zeta:g}, alpha={alpha:g} after sim {after:.3f} s")
 
     # ---------------------------------------------------------------- clock
     def _on_clock(self, msg: Clock) -> None:
+        t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
+        if self.last_tick_ns is not None and t_ns <= self.last_tick_ns:
+            self._tick(t_ns)  # a re-sent (or old) tick: its targets again, from the cache
+            return
+        if any(t == t_ns for t, _ in self.waiting):
+            return
+        self.waiting.append((t_ns, time.monotonic()))
+        self._run_waiting()
+
+    def _run_waiting(self) -> None:
+        """Run the queued ticks, in order, whose sensor samples are there (or need not be waited for)."""
+        while self.waiting:
+            t_ns, since = self.waiting[0]
+            if not self._sensors_ready(t_ns, since):
+                return
+            self.waiting.popleft()
+            self._tick(t_ns)
+
+    def _sensors_ready(self, t_ns: int, since: float) -> bool:
+        """Lockstep with feedback on (or fading): the samples stamped t_ns of every sensor topic, waited
+        for up to sensor_wait wall s; after a wait timed out, no waiting until the samples catch up with
+        the ticks (a dead sensor must not slow every tick down by sensor_wait)."""
+        if not self.lockstep or self.sensors_gave_up or not (self.fb_enabled or self.fade.weight > 0):
+            return True
+        if all(t_ns in b.samples for b in self.buffers):
+            return True
+        waited = time.monotonic() - since
+        if waited <= self.sensor_wait:
+            return False
+        self.sensors_gave_up = True
+        self.sensor_stats["wait_timeouts"] += 1
+        self.throttle.warn(self, "sensor wait", f"no /imu and /foot_load samples stamped {t_ns / 1e9:.3f} s "
+                           f"after {waited:.2f} wall s: going on with the newest (not reproducible)")
+        return True
+
+    # ---------------------------------------------------------------- sensors
+    def _on_imu(self, msg: Imu) -> None:
+        o, w = msg.orientation, msg.angular_velocity
+        try:
+            value = validate_imu(msg.header.frame_id, IMU_FRAME, (o.w, o.x, o.y, o.z), (w.x, w.y, w.z))
+        except ValueError as exc:
+            self._drop("/imu", exc)
+            return
+        self.imu.add(stamp_ns(msg), value)
+        self._sample_arrived()
+
+    def _on_load(self, i: int, frame: str, msg: WrenchStamped) -> None:
+        try:
+            value = validate_load(msg.header.frame_id, frame, msg.wrench.force.z)
+        except ValueError as exc:
+            self._drop(f"/foot_load/{FOOT_LOAD_FRAMES[i][0]}", exc)
+            return
+        self.loads[i].add(stamp_ns(msg), value)
+        self._sample_arrived()
+
+    def _drop(self, topic: str, exc: ValueError) -> None:
+        self.sensor_stats["dropped"] += 1
+        self.throttle.warn(self, topic + " " + reason_key(exc), f"dropped {topic}: {exc}")
+
+    def _sample_arrived(self) -> None:
+        if self.sensors_gave_up and self.last_tick_ns is not None and all(
+                b.newest_ns is not None and b.newest_ns >= self.last_tick_ns for b in self.buffers):
+            self.sensors_gave_up = False  # caught up: wait again
+        if self.waiting:
+            self._run_waiting()
+
+    def _sample(self, t_ns: int) -> tuple[int, np.ndarray, np.ndarray, tuple[float, float]] | None:
+        """(stamp ns, quat, gyro, loads) for the tick t_ns: the samples stamped t_ns when all are there,
+        else the newest of each (stamp: the oldest of them); None before every topic has one."""
+        if all(t_ns in b.samples for b in self.buffers):
+            (quat, gyro), left, right = (b.samples[t_ns] for b in self.buffers)
+            return t_ns, quat, gyro, (left, right)
+        newest = [b.newest() for b in self.buffers]
+        if any(n is None for n in newest):
+            return None
+        (t_imu, (quat, gyro)), (t_l, left), (t_r, right) = newest
+        return min(t_imu, t_l, t_r), quat, gyro, (left, right)
+
+    def _feedback_tick(self, t_ns: int) -> None:
+        """Feed the tick's sensor samples to the source and move the fade (before the tick's targets)."""
+        dt = 0.0 if self.last_tick_ns is None else (t_ns - self.last_tick_ns) / 1e9
+        sample = self._sample(t_ns)
+        self.fb_age = None if sample is None else max(0, t_ns - sample[0]) / 1e9
+        weight = self.fade.update(dt, self.fb_enabled, self.fb_age)
+        self.source.fb.weight = weight
+        if sample is not None and (weight > 0 or self.fb_enabled):
+            observe(self.source, t_ns / 1e9, sample[1], sample[2], sample[3])
+        else:
+            self.source.feedback_g = None  # faded out and off: the open-loop CPG
+        state = self.fade.state(self.fb_enabled)
+        if state != self.fb_state:
+            age = "no sample yet" if self.fb_age is None else f"newest sample {self.fb_age:.3f} s old"
+            text = f"feedback {self.fb_state} -> {state} at sim {t_ns / 1e9:.3f} s ({age})"
+            if state in ("fading", "stale") and self.fb_enabled:
+                self.get_logger().warn(text)
+            else:
+                self.get_logger().info(text)
+            self.fb_state = state
+
+    def _tick(self, t_ns: int) -> None:
+        """One /clock tick (its samples there, in lockstep): feedback, targets, horizon, monitoring."""
         w0 = time.perf_counter()
         self.activity.tick()
-        t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
+        new = self.last_tick_ns is None or t_ns > self.last_tick_ns
+        if new:
+            self._feedback_tick(t_ns)
         if t_ns != self.sent_ns:
             self._publish(t_ns)
         period = None
@@ -230,7 +586,8 @@ class CPGNode(Node):
             period = t_ns - self.last_tick_ns
             if self.lookahead:
                 self._publish(t_ns + period)
-        self.last_tick_ns = t_ns
+        if new:
+            self.last_tick_ns = t_ns
         if period is not None and (self.tick_ns is None or period < self.tick_ns):
             self.tick_ns = period  # the sim's control period (a skipped tick only gives a multiple)
         if self.horizon_ns is not None and self.tick_ns is not None and t_ns >= self.next_horizon_ns:
@@ -273,19 +630,36 @@ class CPGNode(Node):
         the node's idle step (``idle``: runtime.spin_hot calls it every 20 ms of wall time), so a monitor
         tick costs one state read, not two message builds and publishes (about 150 us of CPU). Without an
         idle step the next monitor tick publishes the pending one first."""
-        self.idle()
-        self.monitor_due = (t_ns, state_vector(self.ctrl))
+        self._flush_monitor()
+        self.monitor_due = (t_ns, state_vector(self.ctrl), self._feedback_values())
+
+    def _idle(self) -> None:
+        """Every 20 ms of wall time (runtime.spin_hot): a lockstep tick whose samples are late may have
+        waited long enough; the pending monitor messages."""
+        if self.waiting:
+            self._run_waiting()
+        self._flush_monitor()
 
     def _flush_monitor(self) -> None:
         due, self.monitor_due = self.monitor_due, None
         if due is None:
             return
-        t_ns, data = due
+        t_ns, data, feedback = due
         self.state_msg.data = darray(data)
         self.state_pub.publish(self.state_msg)
-        self._diagnostics(t_ns)
+        self._diagnostics(t_ns, feedback)
 
-    def _diagnostics(self, t_ns: int) -> None:
+    def _feedback_values(self) -> dict[str, str]:
+        """The feedback's part of /diagnostics, as of now."""
+        fb = self.source.fb
+        return {"feedback": self.fb_state, "feedback_enabled": str(self.fb_enabled).lower(),
+                "feedback_weight": f"{self.fade.weight:.6g}",
+                "sensor_age_s": "none" if self.fb_age is None else f"{self.fb_age:.3f}",
+                "feedback_pathways": ",".join(fb.pathways), "phase_resets": str(len(fb.resets)),
+                "sensors_dropped": str(self.sensor_stats["dropped"]),
+                "sensor_wait_timeouts": str(self.sensor_stats["wait_timeouts"])}
+
+    def _diagnostics(self, t_ns: int, feedback: dict[str, str] | None = None) -> None:
         ok = self.stage != "learning" and getattr(self, "converged", True)
         ctrl = getattr(self, "ctrl", None)
         values = {"state": self.stage, "overruns": str(self.timing.overruns)}
@@ -294,8 +668,14 @@ class CPGNode(Node):
                            "alpha_command": f"{ctrl.alpha_command:g}", "alpha": f"{ctrl.alpha:.6g}",
                            "n_oscillators": str(ctrl.net.N), "cpg_file": self.origin,
                            "learning_converged": str(self.converged).lower()})
+        if getattr(self, "source", None) is not None:
+            values.update(feedback or self._feedback_values())
         level = DiagnosticStatus.OK if ok or self.stage == "learning" else DiagnosticStatus.WARN
         text = self.stage if ok or self.stage == "learning" else f"{self.stage} (learning not converged)"
+        if feedback is not None and feedback["feedback"] in ("fading", "stale") \
+                and feedback["feedback_enabled"] == "true":
+            level = max(level, DiagnosticStatus.WARN)
+            text += f"; feedback {feedback['feedback']} (sensor data {feedback['sensor_age_s']} s old)"
         status = DiagnosticStatus(level=level, name="cpg_walker/cpg", message=text, hardware_id="cpg",
                                   values=[KeyValue(key=k, value=v) for k, v in values.items()])
         arr = DiagnosticArray(status=[status])
@@ -304,9 +684,14 @@ class CPGNode(Node):
 
     def on_exit(self) -> None:
         timing = self.timing.summary()
+        fb = self.source.fb
+        feedback = {"enabled": self.fb_enabled, "state": self.fb_state, "weight": self.fade.weight,
+                    "pathways": list(fb.pathways), "phase_resets": len(fb.resets),
+                    "phase_reset_times_s": [round(t, 3) for t, _ in fb.resets[:100]], **self.sensor_stats}
         exit_log(self, "stats " + json.dumps({**self.activity.summary(), "overruns": timing["overruns"],
                                               "tick": timing, "gc": gc_summary(self),
-                                              "horizon_work": latency_summary(self.horizon_work)}))
+                                              "horizon_work": latency_summary(self.horizon_work),
+                                              "feedback": feedback}))
 
 
 

@@ -52,7 +52,7 @@ class GraphSpec:
                for name, value in (("pacing", self.pacing), ("duration", self.duration)) if value is not None}
         out: dict[str, dict[str, object]] = {
             "pid_node": {"lockstep": pacing == "lockstep", "wait_for_targets": True},
-            target: {},
+            target: {"lockstep": pacing == "lockstep"} if not self.player else {},
             "sim_node": sim,
         }
         for name in ("zeta", "alpha"):

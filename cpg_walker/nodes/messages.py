@@ -38,6 +38,12 @@ _MARK_BASE = -1.2345678901234567e-200
 _STAMP = struct.Struct("=iI")  # builtin_interfaces/Time, native byte order as the middleware writes it
 
 
+#: Frame of the /imu messages (the chest IMU site of the model).
+IMU_FRAME = "imu"
+#: /foot_load/<side> topics' sides and the frames of their wrenches (the model's sole sites).
+FOOT_LOAD_FRAMES = (("left", "lleg_sole"), ("right", "rleg_sole"))
+
+
 def darray(x: np.ndarray) -> array.array:
     """A float64 numpy array as array('d') (the fast path of the generated message setters)."""
     out = array.array("d")

@@ -431,6 +431,10 @@ def floats_param(description: str, read_only: bool = False) -> ParameterDescript
     return _typed(description, ParameterType.PARAMETER_DOUBLE_ARRAY, read_only)
 
 
+def strs_param(description: str, read_only: bool = False) -> ParameterDescriptor:
+    return _typed(description, ParameterType.PARAMETER_STRING_ARRAY, read_only)
+
+
 def declare(node: Node, name: str, descriptor: ParameterDescriptor) -> object:
     """Declare ``name`` with the descriptor's type and return its value. The value has one home, the
     node's parameters file config/<node name>.yaml: passed with ``--params-file`` (or a ``-p`` override),

@@ -30,6 +30,8 @@ from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
 from cpg_walker.nodes.messages import (
+    FOOT_LOAD_FRAMES,
+    IMU_FRAME,
     ClockBuilder,
     ImuBuilder,
     JointStateBuilder,
@@ -155,7 +157,7 @@ class SimNode(Node):
         self.pub_js = self.create_publisher(JointState, "/joint_states", 10)
         self.pub_imu = self.create_publisher(Imu, "/imu", 10)
         self.pub_feet = [self.create_publisher(WrenchStamped, f"/foot_load/{s}", 10)
-                         for s in ("left", "right")]
+                         for s, _ in FOOT_LOAD_FRAMES]
         self.pub_odom = self.create_publisher(Odometry, "/odom/ground_truth", 10)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -170,8 +172,8 @@ class SimNode(Node):
         var = {n: (s * s if s > 0 else floor) for n, s in noise.items()}
         self.b_clock = ClockBuilder()
         self.b_js = JointStateBuilder(JOINT_NAMES)
-        self.b_imu = ImuBuilder("imu", var["imu_quat"], var["imu_gyro"], var["imu_accel"])
-        self.b_feet = [WrenchBuilder("lleg_sole"), WrenchBuilder("rleg_sole")]
+        self.b_imu = ImuBuilder(IMU_FRAME, var["imu_quat"], var["imu_gyro"], var["imu_accel"])
+        self.b_feet = [WrenchBuilder(frame) for _, frame in FOOT_LOAD_FRAMES]
         self.b_odom = OdometryBuilder("world", "torso")
 
         self.executor_ = SingleThreadedExecutor()
@@ -277,10 +279,7 @@ class SimNode(Node):
         self.published_at[t_ns] = time.perf_counter()
         self.pub_js.publish(msg)
         self.pub_clock.publish(self.b_clock.fill(t_ns))
-        imu = sim.imu()
-        self.pub_imu.publish(self.b_imu.fill(t_ns, imu.gyro, imu.accel, imu.quat))
-        for pub, b, (f, tq) in zip(self.pub_feet, self.b_feet, sole_wrenches(sim), strict=True):
-            pub.publish(b.fill(t_ns, f, tq))
+        self._publish_sensors(t_ns)
         if self.k % self.odom_every == 0:
             pos, quat = sim.base_pose()
             lin, ang = sim.base_velocity()
@@ -291,11 +290,23 @@ class SimNode(Node):
             for key in sorted(self.published_at)[:PUBLISHED_KEEP // 2]:
                 del self.published_at[key]
 
+    def _publish_sensors(self, t_ns: int) -> None:
+        """/imu and /foot_load/{left,right} of the current state, stamped t_ns (after its /clock)."""
+        sim = self.sim
+        imu = sim.imu()
+        self.pub_imu.publish(self.b_imu.fill(t_ns, imu.gyro, imu.accel, imu.quat))
+        for pub, b, (f, tq) in zip(self.pub_feet, self.b_feet, sole_wrenches(sim), strict=True):
+            pub.publish(b.fill(t_ns, f, tq))
+
     def resend_state(self, t_ns: int) -> None:
+        """Lockstep, no answer yet: the state of t_ns again (the sim has not stepped), sensors included
+        (cpg_node's feedback waits for the sensor samples of each tick; one lost at start-up, before
+        discovery completed, comes again)."""
         sim = self.sim
         self.pub_clock.publish(self.b_clock.fill(t_ns))
         self.pub_js.publish(self.b_js.fill(t_ns, sim.data.qpos[sim._qadr], sim.data.qvel[sim._dadr],
                                            sim.data.actuator_force[sim._act]))
+        self._publish_sensors(t_ns)
         self.resends += 1
 
     def achieved_rtf(self) -> float:

@@ -150,3 +150,38 @@ def check_finite_scalar(name: str, value: object, minimum: float | None = None,
     if maximum is not None and x > maximum:
         raise ValueError(f"{name} must be <= {maximum}, got {x}")
     return x
+
+
+#: How far an orientation quaternion's norm may be from 1 and still be read as a rotation.
+QUAT_NORM_TOLERANCE = 0.01
+
+
+def validate_imu(frame_id: str, expected_frame: str, quat_wxyz: Sequence[float],
+                 gyro: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """An /imu sample (orientation w, x, y, z and angular velocity rad/s) as two arrays, or ValueError with
+    the reason: another frame than ``expected_frame``, a non-finite value, a quaternion whose norm is not
+    1 (within QUAT_NORM_TOLERANCE; ROS marks an absent orientation with a zero quaternion)."""
+    if frame_id != expected_frame:
+        raise ValueError(f"frame {frame_id!r}, expected {expected_frame!r}")
+    q = np.asarray(quat_wxyz, dtype=float).reshape(-1)
+    w = np.asarray(gyro, dtype=float).reshape(-1)
+    if q.size != 4 or w.size != 3:
+        raise ValueError(f"expected a 4-value orientation and a 3-value angular velocity, got {q.size} "
+                         f"and {w.size}")
+    if not (np.isfinite(q).all() and np.isfinite(w).all()):
+        raise ValueError("non-finite orientation or angular velocity")
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > QUAT_NORM_TOLERANCE:
+        raise ValueError(f"orientation quaternion of norm {norm:.4g}, not a rotation")
+    return q / norm, w
+
+
+def validate_load(frame_id: str, expected_frame: str, force_z: float) -> float:
+    """A /foot_load sample's vertical force (N, the sole load) as a float, or ValueError with the reason
+    (another frame than ``expected_frame``, a non-finite force)."""
+    if frame_id != expected_frame:
+        raise ValueError(f"frame {frame_id!r}, expected {expected_frame!r}")
+    f = float(force_z)
+    if not math.isfinite(f):
+        raise ValueError(f"non-finite force {f}")
+    return f

@@ -181,6 +181,9 @@ class FeedbackController:
         self.psi = (0.0, 0.0)
         self._t: float | None = None
         self.resets: list[tuple[float, float]] = []  # (t, Δ rad)
+        #: in [0, 1]: scales every pathway's action (g, the reset's shift); cpg_node fades it out when
+        #: the sensor data goes stale
+        self.weight = 1.0
 
     def observe(self, t: float, tilt: tuple[float, float], loads: tuple[float, float]) -> bool:
         """Filter the (roll, pitch) tilt; True if the right foot just touched down."""
@@ -192,4 +195,4 @@ class FeedbackController:
         return right
 
     def g(self, zeta: float) -> np.ndarray:
-        return feedback_vector(self.psi[0], self.psi[1], zeta, self.cfg, self.pathways)
+        return self.weight * feedback_vector(self.psi[0], self.psi[1], zeta, self.cfg, self.pathways)

@@ -182,9 +182,9 @@ class FeedbackGaitSource(CPGGaitSource):
         if right_td:
             st = self.ctrl.net.state
             self.touchdown_phases.append(phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0]))
-        if right_td and "reset" in self.fb.pathways:
+        if right_td and "reset" in self.fb.pathways and self.fb.weight > 0:
             d = phase_reset(self.ctrl.net.state, self.ctrl.net.omega, self.fb.cfg.reset_phase_rad,
-                            strength=self.fb.cfg.reset_strength)
+                            strength=self.fb.cfg.reset_strength * self.fb.weight)
             self.fb.resets.append((t, d))
         if t >= self._next_trace - 1e-9:  # one sample per trace_dt of sim time, whatever the tick rate
             self.g_trace.append((t, *self.fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
