@@ -14,16 +14,17 @@ import time
 from pathlib import Path
 
 from cpg_walker.experiments.cpg_walk import walk
-from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig, FeedbackController
+from cpg_walker.walker.feedback import PAPER_PATHWAYS, FeedbackConfig, FeedbackController, default_pathways
 from cpg_walker.walker.learning import cpg_defaults, load_controller
 
 ZETAS = (0.8, 1.0, 1.1, 1.2, 1.3, 1.5)
 #: condition name -> (pathways, config overrides); "off" = open loop (no observe at all)
 CONDITIONS: dict[str, tuple[tuple[str, ...], dict]] = {
     "off": ((), {}),
-    "paper": (PATHWAYS, {}),  # eqs 14-15 (|psi|), 18, reset
-    "signed+pendulum+reset": (PATHWAYS, {"lateral_mode": "signed"}),  # beyond the paper
+    "paper": (PAPER_PATHWAYS, {}),  # eqs 14-15 (|psi|), 18, reset
+    "signed+pendulum+reset": (PAPER_PATHWAYS, {"lateral_mode": "signed"}),  # beyond the paper
     "reset": (("reset",), {}),
+    "ours": (default_pathways(), {}),  # config/feedback.yaml's default pathways
 }
 SCHEDULE_AT_S = 10.0
 
