@@ -200,6 +200,17 @@ def test_heading_pathway_drives_only_the_hip_yaws(learned):
     assert moved > 0.01
 
 
+@pytest.mark.parametrize("where", ["handover", "start"])
+def test_heading_reference_is_captured_at_the_handover_or_the_start(learned, where):
+    fb = FeedbackController(FeedbackConfig.load(heading_reference=where), ("heading",))
+    src = FeedbackGaitSource(_ctrl(learned), fb)
+    src.observe(0.0, _yawed(0.2), np.zeros(3), (30, 30))
+    src.targets(0.0)
+    assert (fb.heading_ref is None) == (where == "handover")
+    src.observe(src.active_from, _yawed(0.3), np.zeros(3), (30, 30))
+    assert fb.heading_ref == pytest.approx(0.3 if where == "handover" else 0.2)
+
+
 @pytest.mark.slow
 def test_held_positive_hip_yaw_amplitude_turns_left(learned):
     """Physics check of the heading sign: u > 0 turns the walking robot counter-clockwise (left)."""
@@ -280,7 +291,8 @@ def test_run_time_api_validates(learned):
     ("reset_both_strength", 0.0), ("reset_both_strength", 1.2), ("heading_gain", -1.0),
     ("heading_limit_rad", 0.8), ("amp_slope_knee", float("nan")), ("amp_slope_hip1", 3.0),
     ("reset_phase_backward_rad", 4.0), ("tilt_time_constant_s", -0.1), ("gain_scale", "x"),
-    ("lateral_sign", 0.5), ("reset_strength", 0.0),
+    ("lateral_sign", 0.5), ("reset_strength", 0.0), ("heading_reference", "north"),
+    ("reset_min_abs_zeta", -1.0),
 ])
 def test_bad_config_values_are_refused_naming_the_field(field, value):
     with pytest.raises(ValueError, match=field):

@@ -66,7 +66,10 @@ def _run(args: argparse.Namespace) -> int:
         key, sep, value = item.partition("=")
         if not sep:
             raise ValueError(f"--set {item!r}: expected FIELD=VALUE")
-        overrides[key.strip()] = value.strip() if key.strip() == "lateral_mode" else float(value)
+        try:
+            overrides[key.strip()] = float(value)
+        except ValueError:  # the string fields (lateral_mode, heading_reference)
+            overrides[key.strip()] = value.strip()
     m = run_cpg_walk(args.out, args.duration, args.zeta, args.alpha, args.oscillators, args.cpg,
                      args.transition, args.blend, args.schedule, render=not args.no_render, pathways=pathways,
                      feedback_overrides=overrides)

@@ -11,7 +11,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, default=40.0, metavar="S", help="sim seconds per walk")
     p.add_argument("--zetas", default=None, metavar="Z,Z,...", help="default 0.8,1.0,1.1,1.2,1.3,1.5")
     p.add_argument("--conditions", default=None, metavar="C,C,...",
-                   help="off, paper, signed+pendulum+reset, reset (default: all)")
+                   help="off, paper, signed+pendulum+reset, reset, ours (default: all)")
     p.add_argument("--calibrate", action="store_true", help="first measure the zeta = 1 calibration")
     p.set_defaults(func=_run)
 

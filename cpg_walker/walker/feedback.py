@@ -31,8 +31,10 @@ How we read the paper:
   *applied* (filtered) ζ, so it ramps in with a ζ change. ``reset_both``: soft phase resetting at the
   touchdown of either foot, Δ = κ·wrap(φ_TD − θ_ref) with φ_TD the right-touchdown phase for the walking
   direction (forward ``reset_phase_rad``, backward ``reset_phase_backward_rad``) and φ_TD + π at a left
-  touchdown (the legs are half a cycle apart). ``heading``: keeps the IMU yaw on a reference (captured
-  when feedback takes over, advanced by the commanded ``turn_rate``) with an antisymmetric hip-yaw
+  touchdown (the legs are half a cycle apart), none while |ζ| < ``reset_min_abs_zeta`` (a reversal
+  passing through ζ = 0 has no touchdown phase). ``heading``: keeps the IMU yaw on a reference (the yaw
+  when feedback takes over, or the first observed one: ``heading_reference``; advanced by the commanded
+  ``turn_rate``) with an antisymmetric hip-yaw
   oscillation q_yaw,R = −q_yaw,L = u·cos(θ_ref − φ_TD), u = heading_gain·(filtered yaw error): each
   stance hip turns the pelvis over its planted foot by ≈ 2u per step.
 
@@ -95,17 +97,22 @@ class FeedbackConfig:
     # ours ("reset_both")
     reset_both_strength: float  # κ of the soft reset at either foot's touchdown
     reset_phase_backward_rad: float  # right Hip2 oscillator 0 phase at right touchdown walking backward
+    reset_min_abs_zeta: float  # no reset_both while |applied ζ| is below this (reversing through ζ = 0)
     # ours ("heading")
     heading_gain: float  # hip-yaw amplitude u (rad) per rad of heading error
     heading_limit_rad: float  # |u| clip
     heading_time_constant_s: float  # low-pass on the heading error (the gait's own yaw sway)
+    heading_reference: str  # "handover": the yaw when feedback takes over | "start": the first observed yaw
 
     def __post_init__(self) -> None:
         if self.lateral_mode not in ("abs", "signed"):
             raise ValueError(f"lateral_mode must be 'abs' or 'signed', got {self.lateral_mode!r}")
+        if self.heading_reference not in ("handover", "start"):
+            raise ValueError(f"heading_reference must be 'handover' or 'start', "
+                             f"got {self.heading_reference!r}")
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name == "lateral_mode":
+            if f.name in ("lateral_mode", "heading_reference"):
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ValueError(f"{f.name} must be a finite number, got {v!r}")
@@ -113,7 +120,7 @@ class FeedbackConfig:
             if not (0.0 < getattr(self, name) <= 1.0):
                 raise ValueError(f"{name} must be in (0, 1], got {getattr(self, name)}")
         for name in ("gain_scale", "g_limit", "tilt_time_constant_s", "heading_gain", "heading_limit_rad",
-                     "heading_time_constant_s"):
+                     "heading_time_constant_s", "reset_min_abs_zeta"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.heading_limit_rad > 0.5:
@@ -387,7 +394,7 @@ class FeedbackController:
             return out
         if "reset" in self.pathways and right:
             out.append((self.cfg.reset_phase_rad, w * self.cfg.reset_strength))
-        if "reset_both" in self.pathways:
+        if "reset_both" in self.pathways and abs(zeta) >= self.cfg.reset_min_abs_zeta:
             phi = touchdown_phase(zeta, self.cfg)
             k = w * self.cfg.reset_both_strength
             if right:

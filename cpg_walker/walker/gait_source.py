@@ -168,7 +168,8 @@ class FeedbackGaitSource(CPGGaitSource):
     """CPGGaitSource with the feedback pathways (walker/feedback.py) closed after the hand-over cross-fade.
 
     The loop calls ``observe(t, quat_wxyz, gyro, loads)`` every control tick before ``targets(t)``. Once
-    the CPG has taken over (t >= handover + blend) the heading reference is captured, the g vector of
+    the CPG has taken over (t >= handover + blend; the heading reference is captured then, or at the first
+    observation with ``heading_reference: start``) the g vector of
     eqs 14–18 (at the applied ζ) is held over the network steps, the per-DOF amplitude factors follow the
     applied ζ, touchdowns reset the phase ("reset": right foot, the paper's; "reset_both": either foot)
     and the hip yaws get the heading pathway's oscillation."""
@@ -189,10 +190,10 @@ class FeedbackGaitSource(CPGGaitSource):
     def observe(self, t: float, quat_wxyz: np.ndarray, gyro: np.ndarray, loads: tuple[float, float]) -> None:
         fb = self.fb
         fb.observe(t, quat_wxyz, gyro, loads)
+        if fb.heading_ref is None and (t >= self.active_from or fb.cfg.heading_reference == "start"):
+            fb.capture_heading()
         if t < self.active_from:
             return
-        if fb.heading_ref is None:
-            fb.capture_heading()
         self._advance(t)  # the network at t before the reset / the new g
         z = self.ctrl.zeta
         g = fb.g(z)
