@@ -251,15 +251,15 @@ def _drive(src, n: int, rng: np.random.Generator) -> list[np.ndarray]:
 
 
 def test_weight_zero_is_the_open_loop_bit_for_bit(learned):
-    kw = dict(zeta=1.0, schedule=[(7.0, 1.5, 1.0)])
-    open_loop = _drive(CPGGaitSource(_ctrl(learned), **kw), 5000, np.random.default_rng(0))
+    kw = dict(zeta=1.0, schedule=[(2.5, 1.5, 1.0)], handover_s=1.0)  # feedback active from 2 s
+    open_loop = _drive(CPGGaitSource(_ctrl(learned), **kw), 2500, np.random.default_rng(0))
     every = ("lateral", "pendulum", "amplitude", "reset_both", "heading")
     fb = FeedbackController(FeedbackConfig.load(), every)
     fb.weight = 0.0
-    closed = _drive(FeedbackGaitSource(_ctrl(learned), fb, **kw), 5000, np.random.default_rng(0))
+    closed = _drive(FeedbackGaitSource(_ctrl(learned), fb, **kw), 2500, np.random.default_rng(0))
     assert all(np.array_equal(a, b) for a, b in zip(open_loop, closed, strict=True))
     fb1 = FeedbackController(FeedbackConfig.load(), every)
-    full = _drive(FeedbackGaitSource(_ctrl(learned), fb1, **kw), 5000, np.random.default_rng(0))
+    full = _drive(FeedbackGaitSource(_ctrl(learned), fb1, **kw), 2500, np.random.default_rng(0))
     assert not np.array_equal(open_loop[-1], full[-1])  # the same drive with weight 1 does act
     assert len(fb1.resets) > 0
 
@@ -310,3 +310,23 @@ def test_default_pathways_come_from_the_yaml(tmp_path):
     with pytest.raises(ValueError, match="reset_both"):
         default_pathways(str(bad))
     assert FeedbackConfig.load(str(bad)).heading_gain == d["heading_gain"]  # the list is not a field
+
+
+def test_forecast_carries_the_dof_amplitude_factors(learned):
+    """HumanoidCPG.forecast while α is being reached applies the per-DOF factors as stepping does."""
+    ctrl = _ctrl(learned)
+    h = ctrl.settings.control_dt
+    ctrl.set_dof_amplitude_scale(np.linspace(0.7, 1.2, 10))
+    for _ in range(500):
+        ctrl.step(h)
+    ctrl.set_alpha(0.8)
+    ctrl.step(h)
+    offsets = np.array([0.04, 0.1, 0.2])
+    q, _ = ctrl.forecast(offsets)
+    steps_done, rows = 0, []
+    for n in np.rint(offsets / h).astype(int):
+        for _ in range(n - steps_done):
+            ctrl.step(h)
+        steps_done = n
+        rows.append(ctrl.joint_targets()[0])
+    assert np.abs(q - np.array(rows)).max() < 2e-3
