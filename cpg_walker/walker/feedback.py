@@ -1,7 +1,8 @@
 """Sensory feedback pathways of the humanoid CPG (paper Section III-B, eqs 14–18; gains eqs 19–20).
 
-Pure numpy (no rclpy, no MuJoCo): the inputs are the chest IMU orientation (quaternion, as on /imu) and
-the two sole loads (as on /foot_load), so the in-process loop and a ROS node feed the same object.
+No rclpy, no simulation (numpy, plus the robot layer's contact hysteresis and IMU tilt): the inputs are
+the chest IMU orientation (quaternion) and angular velocity, as on /imu, and the two sole loads (as on
+/foot_load), so the in-process loop and a ROS node feed the same object.
 
 How we read the paper:
 
@@ -51,6 +52,7 @@ import numpy as np
 
 from cpg_walker.cpg.hopf import phase
 from cpg_walker.robot.contact import TouchdownDetector
+from cpg_walker.robot.hoap2 import tilt_from_quat
 from cpg_walker.robot.joints import CONTROLLED_JOINTS, PAPER_LEG_DOFS, SIDES
 
 #: The paper's pathways (Sec. III-B, as printed) and ours (module docstring).
@@ -346,7 +348,8 @@ class FeedbackController:
         self.turn_rate = rate
 
     def capture_heading(self) -> None:
-        """Take the current (observed) yaw as the heading reference (at the CPG hand-over)."""
+        """Take the current (observed) yaw as the heading reference (FeedbackGaitSource: at the hand-over or
+        at the first observation, ``heading_reference``)."""
         self.heading_ref = self.yaw
         self._herr.y = None
 
@@ -355,8 +358,6 @@ class FeedbackController:
         """One control tick's readings: chest IMU orientation (w, x, y, z) and angular velocity (rad/s,
         as on /imu), (left, right) sole loads (N). Updates the filtered tilt ψ, the yaw, the heading
         error and ``touchdowns``."""
-        from cpg_walker.robot.hoap2 import tilt_from_quat
-
         q = np.asarray(quat_wxyz, dtype=float)
         if q.shape != (4,) or not np.all(np.isfinite(q)) or not (0.5 < float(q @ q) < 2.0):
             raise ValueError(f"observe: quat_wxyz must be a finite unit quaternion (w, x, y, z), got {q}")
