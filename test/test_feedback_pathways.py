@@ -330,3 +330,21 @@ def test_forecast_carries_the_dof_amplitude_factors(learned):
         steps_done = n
         rows.append(ctrl.joint_targets()[0])
     assert np.abs(q - np.array(rows)).max() < 2e-3
+
+
+def test_forecast_includes_the_hip_yaw_oscillation(learned):
+    fb = FeedbackController(FeedbackConfig.load(heading_time_constant_s=0.0), ("heading",))
+    src = FeedbackGaitSource(_ctrl(learned), fb)
+    h = src.ctrl.settings.control_dt
+    k0 = int(np.ceil(src.active_from / h))
+    src.observe(k0 * h, UP, np.zeros(3), (30, 30))
+    src.observe((k0 + 1) * h, _yawed(-0.2), np.zeros(3), (30, 30))
+    src.targets((k0 + 1) * h)
+    times = (k0 + 1) * h + np.array([0.02, 0.1, 0.3])
+    q, _ = src.forecast(times)
+    yaw_idx = [JOINT_NAMES.index(j) for j in HIP_YAW]
+    exact = []
+    for t in times:  # the same held u: no new observation changes it
+        exact.append(src.targets(t)[0][yaw_idx])
+    assert np.abs(q[:, yaw_idx] - np.array(exact)).max() < 2e-3
+    assert np.abs(np.array(exact)).max() > 0.01

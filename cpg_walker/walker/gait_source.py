@@ -215,13 +215,25 @@ class FeedbackGaitSource(CPGGaitSource):
     def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         q, qd = super().targets(t)
         if self._yaw_u != 0.0 and t >= self.active_from:
-            net = self.ctrl.net
-            st = net.state
-            theta = phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0])
-            dq, dqd = hip_yaw_offsets(self._yaw_u, theta, touchdown_phase(self.ctrl.zeta, self.fb.cfg),
-                                      float(net.frequencies()[RIGHT_HIP2, 0]))
-            q = q.copy()
-            qd = qd.copy()
-            q[self._yaw_idx] += dq
-            qd[self._yaw_idx] += dqd
+            q, qd = q.copy(), qd.copy()
+            self._add_hip_yaw(q, qd, 0.0)
         return q, qd
+
+    def forecast(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`CPGGaitSource.forecast` plus the heading pathway's hip-yaw oscillation at the held u (its
+        phase advanced at the current frequency)."""
+        q, qd = super().forecast(times)
+        if self._yaw_u != 0.0:
+            times = np.asarray(times, dtype=float).reshape(-1)
+            for k in np.flatnonzero(times >= self.active_from):
+                self._add_hip_yaw(q[k], qd[k], max(float(times[k]) - self._t_net, 0.0))
+        return q, qd
+
+    def _add_hip_yaw(self, q: np.ndarray, qd: np.ndarray, ahead_s: float) -> None:
+        net = self.ctrl.net
+        st = net.state
+        w = float(net.frequencies()[RIGHT_HIP2, 0])
+        theta = phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0]) + w * ahead_s
+        dq, dqd = hip_yaw_offsets(self._yaw_u, theta, touchdown_phase(self.ctrl.zeta, self.fb.cfg), w)
+        q[self._yaw_idx] += dq
+        qd[self._yaw_idx] += dqd
