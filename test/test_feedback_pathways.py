@@ -52,9 +52,14 @@ def _ctrl(learned: dict) -> HumanoidCPG:
 # ----------------------------------------------------------------------------------------- amplitude
 def test_amplitude_factors_grow_with_speed_only():
     cfg = FeedbackConfig.load(amp_slope_hip1=-0.6, amp_slope_hip2=-0.2, amp_slope_knee=0.4,
-                              amp_slope_ankle1=0.0, amp_slope_ankle2=-0.6)
+                              amp_slope_ankle1=0.0, amp_slope_ankle2=-0.6, amp_slow_slope_hip1=0.0,
+                              amp_slow_slope_hip2=0.0, amp_slow_slope_knee=0.5, amp_slow_slope_ankle1=0.0,
+                              amp_slow_slope_ankle2=0.0)
     assert np.array_equal(amplitude_factors(1.0, cfg), np.ones(10))
-    assert np.array_equal(amplitude_factors(0.8, cfg), np.ones(10))  # none below |ζ| = 1
+    slow = amplitude_factors(-0.6, cfg)  # below |ζ| = 1 only the slow slopes act
+    assert np.allclose(slow[list(KNEE)], 1.2)
+    slow[list(KNEE)] = 1.0
+    assert np.array_equal(slow, np.ones(10))
     f = amplitude_factors(1.5, cfg)
     assert np.allclose(f[list(HIP1)], 0.7) and np.allclose(f[list(ANKLE2)], 0.7)
     assert np.allclose(f[list(HIP2)], 0.9) and np.allclose(f[list(KNEE)], 1.2)
@@ -290,6 +295,7 @@ def test_run_time_api_validates(learned):
 @pytest.mark.parametrize("field,value", [
     ("reset_both_strength", 0.0), ("reset_both_strength", 1.2), ("heading_gain", -1.0),
     ("heading_limit_rad", 0.8), ("amp_slope_knee", float("nan")), ("amp_slope_hip1", 3.0),
+    ("amp_slow_slope_knee", -2.5),
     ("reset_phase_backward_rad", 4.0), ("tilt_time_constant_s", -0.1), ("gain_scale", "x"),
     ("lateral_sign", 0.5), ("reset_strength", 0.0), ("heading_reference", "north"),
     ("reset_min_abs_zeta", -1.0),

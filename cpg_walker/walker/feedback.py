@@ -28,7 +28,8 @@ How we read the paper:
   error of the reference oscillator (``strength`` < 1 applies a fraction of Δ).
 * Beyond the paper (ours, each switchable by name; how they were measured: config/feedback.yaml):
   ``amplitude``: per-DOF amplitude factors 1 + k_b·max(|ζ| − 1, 0) on Hip1, Hip2, Knee, Ankle1, Ankle2
-  (shorter Hip1/Ankle2 sway, shorter Hip2 strides and more knee lift at speed), a function of the
+  (shorter Hip1/Ankle2 sway, shorter Hip2 strides and more knee lift at speed), and 1 + k_slow,b·
+  max(1 − |ζ|, 0) below |ζ| = 1 (more knee lift when slow), a function of the
   *applied* (filtered) ζ, so it ramps in with a ζ change. ``reset_both``: soft phase resetting at the
   touchdown of either foot, Δ = κ·wrap(φ_TD − θ_ref) with φ_TD the right-touchdown phase for the walking
   direction (forward ``reset_phase_rad``, backward ``reset_phase_backward_rad``) and φ_TD + π at a left
@@ -96,6 +97,12 @@ class FeedbackConfig:
     amp_slope_knee: float
     amp_slope_ankle1: float
     amp_slope_ankle2: float
+    # ... and 1 + k·max(1 − |ζ|, 0) below |ζ| = 1 (slow walking)
+    amp_slow_slope_hip1: float
+    amp_slow_slope_hip2: float
+    amp_slow_slope_knee: float
+    amp_slow_slope_ankle1: float
+    amp_slow_slope_ankle2: float
     # ours ("reset_both")
     reset_both_strength: float  # κ of the soft reset at either foot's touchdown
     reset_phase_backward_rad: float  # right Hip2 oscillator 0 phase at right touchdown walking backward
@@ -133,8 +140,8 @@ class FeedbackConfig:
         for name in ("reset_phase_rad", "reset_phase_backward_rad"):
             if abs(getattr(self, name)) > math.pi:
                 raise ValueError(f"{name} must be in [-pi, pi], got {getattr(self, name)}")
-        for name in ("amp_slope_hip1", "amp_slope_hip2", "amp_slope_knee", "amp_slope_ankle1",
-                     "amp_slope_ankle2"):
+        for name in (f"amp_{w}slope_{j}" for w in ("", "slow_")
+                     for j in ("hip1", "hip2", "knee", "ankle1", "ankle2")):
             if abs(getattr(self, name)) > 2.0:
                 raise ValueError(f"{name} must be in [-2, 2], got {getattr(self, name)}")
 
@@ -261,12 +268,13 @@ def phase_reset(state: np.ndarray, omega: np.ndarray, target: float, ref: tuple[
 
 # ------------------------------------------------------------------------------------------- ours
 def amplitude_factors(zeta: float, cfg: FeedbackConfig) -> np.ndarray:
-    """(10,) per-DOF amplitude factors 1 + k_b·max(|ζ| − 1, 0) ("amplitude"; 1 at |ζ| <= 1), >= 0."""
-    u = max(abs(zeta) - 1.0, 0.0)
+    """(10,) per-DOF amplitude factors ("amplitude"), >= 0: 1 + k_b·max(|ζ| − 1, 0) above |ζ| = 1,
+    1 + k_slow,b·max(1 − |ζ|, 0) below (1 at |ζ| = 1)."""
+    fast, slow = max(abs(zeta) - 1.0, 0.0), max(1.0 - abs(zeta), 0.0)
     f = np.ones(len(CONTROLLED_JOINTS))
-    for dofs, k in ((HIP1, cfg.amp_slope_hip1), (HIP2, cfg.amp_slope_hip2), (KNEE, cfg.amp_slope_knee),
-                    (ANKLE1, cfg.amp_slope_ankle1), (ANKLE2, cfg.amp_slope_ankle2)):
-        f[list(dofs)] = max(1.0 + k * u, 0.0)
+    for dofs, j in ((HIP1, "hip1"), (HIP2, "hip2"), (KNEE, "knee"), (ANKLE1, "ankle1"), (ANKLE2, "ankle2")):
+        k, k_slow = getattr(cfg, f"amp_slope_{j}"), getattr(cfg, f"amp_slow_slope_{j}")
+        f[list(dofs)] = max(1.0 + k * fast + k_slow * slow, 0.0)
     return f
 
 
