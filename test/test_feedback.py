@@ -27,6 +27,16 @@ from cpg_walker.walker.feedback import (
 )
 
 
+def _quat(roll: float, pitch: float) -> np.ndarray:
+    """Chest orientation (w, x, y, z) with this (roll, pitch) tilt: pitch about y, then roll about x."""
+    qy = np.array([math.cos(pitch / 2), 0.0, math.sin(pitch / 2), 0.0])
+    qx = np.array([math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0])
+    w1, x1, y1, z1 = qy
+    w2, x2, y2, z2 = qx
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
 @pytest.fixture(scope="module")
 def ctrl() -> HumanoidCPG:
     return HumanoidCPG.load(config_path("cpg_humanoid.yaml"))
@@ -159,9 +169,9 @@ def test_controller_filters_and_rejects_unknown_pathways():
         FeedbackController(FeedbackConfig.load(), ("lateral", "vision"))
     fc = FeedbackController(FeedbackConfig.load(tilt_time_constant_s=0.1, pitch_reference_rad=0.05),
                             ("lateral",))
-    fc.observe(0.0, (0.0, 0.05), (20, 20))
-    fc.observe(0.1, (0.1, 0.05), (20, 20))
-    assert fc.psi[0] == pytest.approx(0.1 * (1 - math.exp(-1)))
+    fc.observe(0.0, _quat(0.0, 0.05), np.zeros(3), (20, 20))
+    fc.observe(0.1, _quat(0.1, 0.05), np.zeros(3), (20, 20))
+    assert fc.psi[0] == pytest.approx(tilt_from_quat(_quat(0.1, 0.05))[0] * (1 - math.exp(-1)))
     assert fc.psi[1] == pytest.approx(0.0)
     assert FeedbackConfig.load().lateral_mode in ("abs", "signed")
 
@@ -188,7 +198,7 @@ def test_feedback_trace_keeps_one_sample_per_trace_period(ctrl):
     n = 1500  # 3 s of 2 ms ticks
     for k in range(k0, k0 + n):
         t = k * h
-        src.observe(t, (0.01, 0.06), (30.0, 30.0))
+        src.observe(t, _quat(0.01, 0.06), np.zeros(3), (30.0, 30.0))
         src.targets(t)
     times = np.array([row[0] for row in src.g_trace])
     assert len(times) == pytest.approx(n * h / src.trace_dt, abs=1)

@@ -1,6 +1,6 @@
 """`cpg-walker cpg-walk --out DIR [--duration S] [--zeta Z] [--alpha A] [--oscillators N] [--cpg FILE]`:
 the learned humanoid CPG walks the simulated HOAP-2 in-process (no ROS); DIR/walk.json.
-`--feedback on [--pathways lateral,pendulum,reset]` closes the paper's feedback pathways (cpg/feedback.py)."""
+`--feedback on [--pathways P,P] [--set FIELD=VALUE]` closes feedback pathways (walker/feedback.py)."""
 
 from __future__ import annotations
 
@@ -38,8 +38,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="commands (time, zeta, alpha) applied during the walk")
     p.add_argument("--feedback", choices=("on", "off"), default="off",
                    help="sensory feedback pathways (paper Sec. III-B; config/feedback.yaml), default off")
-    p.add_argument("--pathways", default="lateral,pendulum,reset", metavar="P,P,...",
-                   help="with --feedback on: any of lateral, pendulum, reset (default all three)")
+    p.add_argument("--pathways", default=None, metavar="P,P,...",
+                   help="with --feedback on: any of lateral, pendulum, reset (the paper's), amplitude, "
+                        "reset_both, heading (ours); default: config/feedback.yaml's pathways")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                   help="override a config/feedback.yaml value for this walk (repeatable)")
     p.add_argument("--no-render", action="store_true", help="skip the filmstrip")
     p.set_defaults(func=_run)
 
@@ -54,9 +57,22 @@ def _run(args: argparse.Namespace) -> int:
 
     pathways = None
     if args.feedback == "on":
-        pathways = tuple(p.strip() for p in args.pathways.split(",") if p.strip())
+        from cpg_walker.walker.feedback import default_pathways
+
+        pathways = (default_pathways() if args.pathways is None
+                    else tuple(p.strip() for p in args.pathways.split(",") if p.strip()))
+    overrides = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE")
+        try:
+            overrides[key.strip()] = float(value)
+        except ValueError:  # the string fields (lateral_mode, heading_reference)
+            overrides[key.strip()] = value.strip()
     m = run_cpg_walk(args.out, args.duration, args.zeta, args.alpha, args.oscillators, args.cpg,
-                     args.transition, args.blend, args.schedule, render=not args.no_render, pathways=pathways)
+                     args.transition, args.blend, args.schedule, render=not args.no_render, pathways=pathways,
+                     feedback_overrides=overrides)
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps", "lateral_drift_m",
             "heading_change_deg", "n_oscillators")
     print(json.dumps({k: m[k] for k in keys}))

@@ -45,7 +45,8 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float | None = None, alpha: f
     sim.reset()
     pid = PidLaw.from_config()
     result = run_replay(sim, source, pid, duration, progress=progress, on_log=on_log)
-    m = summarize(result, period_s=ctrl.period / abs(zeta) if zeta else None)
+    z_end = sorted(schedule)[-1][1] if schedule else zeta  # the stride at the end of the walk
+    m = summarize(result, period_s=ctrl.period / abs(z_end) if z_end else None)
     m.update({
         "zeta": zeta, "alpha": alpha, "feedback": bool(feedback is not None and feedback.pathways),
         "n_oscillators": int(ctrl.net.N),
@@ -73,6 +74,13 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float | None = None, alpha: f
             m["right_touchdown_phase_rad"] = {
                 "circular_mean": round(float(np.angle(np.mean(np.exp(1j * ph)))), 4),
                 "resultant_length": round(float(np.abs(np.mean(np.exp(1j * ph)))), 4), "n": len(ph)}
+    if isinstance(source, FeedbackGaitSource) and source.touchdown_log:
+        z_end = source.ctrl.zeta  # phases at the final applied ζ (a calibration of the touchdown phase)
+        ph = np.array([p for _, z, p in source.touchdown_log if abs(z - z_end) < 1e-3])
+        if ph.size:
+            m["right_touchdown_phase_final_zeta_rad"] = {
+                "zeta": round(z_end, 4), "circular_mean": round(float(np.angle(np.mean(np.exp(1j * ph)))), 4),
+                "resultant_length": round(float(np.abs(np.mean(np.exp(1j * ph)))), 4), "n": int(ph.size)}
     after = [x for x in result.touchdowns["right"] if x > source.handover + blend_s]
     if len(after) > 2:
         m["right_touchdown_interval_after_handover_s"] = round(float(np.median(np.diff(after))), 3)
@@ -95,7 +103,7 @@ def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float | None = None
                  n_oscillators: int | None = None, cpg_file: str | None = None, transition: str = "recording",
                  blend_s: float = 1.0, schedule: list[tuple[float, float, float]] | None = None,
                  render: bool = True, progress_enabled: bool = True,
-                 pathways: tuple[str, ...] | None = None) -> dict:
+                 pathways: tuple[str, ...] | None = None, feedback_overrides: dict | None = None) -> dict:
     """`cpg-walker cpg-walk`: walk, write DIR/walk.json and DIR/filmstrip.png. `pathways` (None = no
     feedback) closes those feedback pathways with config/feedback.yaml. ``zeta``/``alpha`` None: cpg_node's
     (config/cpg.yaml)."""
@@ -119,7 +127,7 @@ def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float | None = None
     if pathways is not None:
         from cpg_walker.walker.feedback import FeedbackConfig
 
-        fb = FeedbackController(FeedbackConfig.load(), pathways)
+        fb = FeedbackController(FeedbackConfig.load(**(feedback_overrides or {})), pathways)
     m = walk(ctrl, duration, zeta, alpha, transition, blend_s, schedule=schedule, on_log=grabber,
              progress=progress, feedback=fb)
     progress.close()

@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.experiments.config_file import Config, deep_merge
-from cpg_walker.experiments.walk_runs import Push, WalkSpec, default_pathways, run_many, run_walk, start_time
-from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig
+from cpg_walker.experiments.walk_runs import Push, WalkSpec, run_many, run_walk, start_time
+from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig, default_pathways
 
 _SCENARIO_KEYS = {"name", "zeta", "alpha", "start", "duration_after_s", "friction_scale", "push", "schedule"}
 _PUSH_KEYS = {"at_s", "impulse_ns", "duration_s", "direction"}

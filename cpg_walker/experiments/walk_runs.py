@@ -19,41 +19,27 @@ import math
 import os
 import re
 from collections.abc import Callable, Iterable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
-from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig, FeedbackController
+from cpg_walker.walker.feedback import PAPER_PATHWAYS, FeedbackConfig, FeedbackController, default_pathways
 from cpg_walker.walker.gait_source import CPGGaitSource, FeedbackGaitSource
 from cpg_walker.walker.learning import cpg_defaults, load_controller
 
-#: the paper's three pathways (Sec. III-B) as printed: eqs 14-15 with |psi|, eq 18, phase resetting
-PAPER_PATHWAYS = ("lateral", "pendulum", "reset")
+#: the paper's lateral law as printed (eqs 14-15 with |psi|)
 PAPER_OVERRIDES = {"lateral_mode": "abs"}
 _START = re.compile(r"^at_(\d+(?:\.\d+)?)s$")
 
 
-def default_pathways() -> tuple[str, ...]:
-    """"ours": the default pathway list of config/feedback.yaml — FeedbackConfig's ``pathways`` (or
-    ``default_pathways``) field when it has one, else walker.feedback's ``DEFAULT_PATHWAYS``, else every
-    pathway (PATHWAYS)."""
-    from cpg_walker.walker import feedback
-
-    names = {f.name for f in fields(FeedbackConfig)}
-    for key in ("pathways", "default_pathways"):
-        if key in names:
-            return tuple(getattr(FeedbackConfig.load(), key))
-    return tuple(getattr(feedback, "DEFAULT_PATHWAYS", PATHWAYS))
-
-
 def variant(name: str) -> tuple[tuple[str, ...] | None, dict]:
-    """(pathways, FeedbackConfig overrides) of a named variant: off (no feedback), paper, ours."""
+    """(pathways, FeedbackConfig overrides) of a named variant: off (no feedback), paper (the three
+    pathways of Sec. III-B as printed), ours (config/feedback.yaml's default pathways)."""
     if name == "off":
         return None, {}
-    if name == "paper":  # overrides of fields FeedbackConfig still has
-        known = {f.name for f in fields(FeedbackConfig)}
-        return PAPER_PATHWAYS, {k: v for k, v in PAPER_OVERRIDES.items() if k in known}
+    if name == "paper":
+        return PAPER_PATHWAYS, dict(PAPER_OVERRIDES)
     if name == "ours":
         return default_pathways(), {}
     raise ValueError(f"unknown feedback variant {name!r}; use off, paper or ours")

@@ -149,15 +149,12 @@ def pathway_list(value: object) -> tuple[str, ...]:
         raise ValueError(f"unknown feedback pathway(s) {bad}; choose from {list(PATHWAYS)}")
     if len(set(names)) != len(names):
         raise ValueError(f"feedback_pathways names a pathway twice: {names}")
-    check = getattr(feedback_core, "check_pathways", None)
-    return tuple(check(names)) if check is not None else tuple(names)
+    return tuple(feedback_core.check_pathways(names))
 
 
 def default_pathway_names() -> tuple[str, ...]:
-    """The pathways ``feedback_pathways`` defaults to: the feedback core's default (config/feedback.yaml's
-    ``pathways``, the one home) where it has one, else all of PATHWAYS."""
-    default = getattr(feedback_core, "default_pathways", None)
-    return tuple(default()) if default is not None else PATHWAYS
+    """The pathways ``feedback_pathways`` defaults to: config/feedback.yaml's ``pathways`` (the one home)."""
+    return tuple(feedback_core.default_pathways())
 
 
 def config_fields() -> dict[str, type]:

@@ -224,6 +224,7 @@ class HumanoidCPG:
         self.alpha_command = 1.0
         self._zf = np.ones(3)  # cascaded lag states (ζ)
         self._af = np.ones(3)  # cascaded lag states (α)
+        self.dof_scale = np.ones(net.B)  # per-DOF amplitude factor on top of α (feedback "amplitude")
         self._deriv = np.empty((2, net.B, net.N))
         self.alpha_learned = net.alpha.copy()  # frozen with amplitude scale 1
         if not net.learning:
@@ -361,7 +362,7 @@ class HumanoidCPG:
             self.net.step(rest)
         self._zf, self._af = zf, af
         self.net.set_frequency_scale(float(self._zf[-1]))
-        self.net.set_amplitude_scale(float(self._af[-1]))
+        self.net.set_amplitude_scale(float(self._af[-1]) * self.dof_scale)
         self.zeta_command, self.alpha_command = zc, ac
 
     def set_zeta(self, zeta: float) -> None:
@@ -385,7 +386,18 @@ class HumanoidCPG:
         self._zf[:] = self.zeta_command
         self._af[:] = self.alpha_command
         self.net.set_frequency_scale(self.zeta_command)
-        self.net.set_amplitude_scale(self.alpha_command)
+        self.net.set_amplitude_scale(self.alpha_command * self.dof_scale)
+
+    def set_dof_amplitude_scale(self, scale: np.ndarray) -> None:
+        """Per-DOF factor s_b on the amplitude: α_b = α·s_b·α_learned (s = 1: the plain α command). Held
+        until changed; the network's amplitude relaxation smooths a step."""
+        scale = np.asarray(scale, dtype=float).reshape(-1)
+        if scale.shape != (self.net.B,) or not np.all(np.isfinite(scale)) or np.any(scale < 0):
+            raise ValueError(f"dof amplitude scale: expected {self.net.B} finite values >= 0, got {scale}")
+        if np.array_equal(scale, self.dof_scale):
+            return
+        self.dof_scale = scale.copy()
+        self.net.set_amplitude_scale(float(self._af[-1]) * self.dof_scale)
 
     @property
     def zeta(self) -> float:
@@ -419,7 +431,7 @@ class HumanoidCPG:
         if self._filter(self._zf, self.zeta_command, dt):
             self.net.set_frequency_scale(float(self._zf[-1]))
         if self._filter(self._af, self.alpha_command, dt):
-            self.net.set_amplitude_scale(float(self._af[-1]))
+            self.net.set_amplitude_scale(float(self._af[-1]) * self.dof_scale)
         self.net.step(dt, feedback=feedback)
 
     def joint_targets(self) -> tuple[np.ndarray, np.ndarray]:
@@ -443,7 +455,7 @@ class HumanoidCPG:
         h = self.settings.control_dt
         mid = np.concatenate(([0.0], offsets[:-1])) if offsets.size else offsets
         zeta = self._filter_path(self._zf, zc, np.rint(0.5 * (mid + offsets) / h))
-        amp = self._filter_path(self._af, ac, np.rint(offsets / h))
+        amp = self._filter_path(self._af, ac, np.rint(offsets / h))[:, None] * self.dof_scale[None]
         return self.net.forecast(offsets, zeta=zeta, amplitude=amp)
 
     def _filter_path(self, state: np.ndarray, command: float, steps: np.ndarray) -> np.ndarray:

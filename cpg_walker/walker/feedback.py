@@ -1,7 +1,8 @@
 """Sensory feedback pathways of the humanoid CPG (paper Section III-B, eqs 14–18; gains eqs 19–20).
 
-Pure numpy (no rclpy, no MuJoCo): the inputs are the chest IMU orientation (quaternion, as on /imu) and
-the two sole loads (as on /foot_load), so the in-process loop and a ROS node feed the same object.
+No rclpy, no simulation (numpy, plus the robot layer's contact hysteresis and IMU tilt): the inputs are
+the chest IMU orientation (quaternion) and angular velocity, as on /imu, and the two sole loads (as on
+/foot_load), so the in-process loop and a ROS node feed the same object.
 
 How we read the paper:
 
@@ -25,6 +26,22 @@ How we read the paper:
   ``reset_phase_rad`` — the phase it has at right touchdown in the learned gait. A time shift keeps
   every relative phase: oscillator i of CPG b is rotated by (ω_{b,i}/ω_ref)·Δ, Δ the wrapped phase
   error of the reference oscillator (``strength`` < 1 applies a fraction of Δ).
+* Beyond the paper (ours, each switchable by name; how they were measured: config/feedback.yaml):
+  ``amplitude``: per-DOF amplitude factors 1 + k_b·max(|ζ| − 1, 0) on Hip1, Hip2, Knee, Ankle1, Ankle2
+  (shorter Hip1/Ankle2 sway, shorter Hip2 strides and more knee lift at speed), and 1 + k_slow,b·
+  max(1 − |ζ|, 0) below |ζ| = 1 (more knee lift when slow), a function of the
+  *applied* (filtered) ζ, so it ramps in with a ζ change. ``reset_both``: soft phase resetting at the
+  touchdown of either foot, Δ = κ·wrap(φ_TD − θ_ref) with φ_TD the right-touchdown phase for the walking
+  direction (forward ``reset_phase_rad``, backward ``reset_phase_backward_rad``) and φ_TD + π at a left
+  touchdown (the legs are half a cycle apart), none while |ζ| < ``reset_min_abs_zeta`` (a reversal
+  passing through ζ = 0 has no touchdown phase). ``heading``: keeps the IMU yaw on a reference (the yaw
+  when feedback takes over, or the first observed one: ``heading_reference``; advanced by the commanded
+  ``turn_rate``) with an antisymmetric hip-yaw
+  oscillation q_yaw,R = −q_yaw,L = u·cos(θ_ref − φ_TD), u = heading_gain·(filtered yaw error): each
+  stance hip turns the pelvis over its planted foot by ≈ 2u per step.
+
+Every action (g, reset shift, amplitude factors, hip-yaw offsets) is scaled by ``weight`` ∈ [0, 1]
+(a ROS node fades feedback out with it when its sensor data go stale); weight 0 is the open loop.
 """
 
 from __future__ import annotations
@@ -36,9 +53,12 @@ import numpy as np
 
 from cpg_walker.cpg.hopf import phase
 from cpg_walker.robot.contact import TouchdownDetector
+from cpg_walker.robot.hoap2 import tilt_from_quat
 from cpg_walker.robot.joints import CONTROLLED_JOINTS, PAPER_LEG_DOFS, SIDES
 
-PATHWAYS = ("lateral", "pendulum", "reset")
+#: The paper's pathways (Sec. III-B, as printed) and ours (module docstring).
+PAPER_PATHWAYS = ("lateral", "pendulum", "reset")
+PATHWAYS = (*PAPER_PATHWAYS, "amplitude", "reset_both", "heading")
 
 
 def _dofs(paper: str) -> tuple[int, ...]:
@@ -46,16 +66,19 @@ def _dofs(paper: str) -> tuple[int, ...]:
 
 
 HIP1 = _dofs("Hip1")
+HIP2 = _dofs("Hip2")
 ANKLE2 = _dofs("Ankle2")
 KNEE = _dofs("Knee")
 ANKLE1 = _dofs("Ankle1")
 RIGHT_HIP2 = CONTROLLED_JOINTS.index(f"rleg_joint_{PAPER_LEG_DOFS['Hip2']}")
+#: hip yaw joints (``*_joint_1``, not driven by the CPG) as (left, right) names
+HIP_YAW = tuple(f"{s}leg_joint_1" for s in SIDES)
 
 
 @dataclass(frozen=True)
 class FeedbackConfig:
     """Constants of the feedback pathways. Their values live in config/feedback.yaml only: build with
-    ``load`` (overrides by keyword)."""
+    ``load`` (overrides by keyword); a bad value raises ValueError naming the field."""
 
     gain_scale: float  # our g per rad of tilt = gain_scale × the paper's K (eqs 19–20)
     lateral_base: float  # eq 19
@@ -66,24 +89,66 @@ class FeedbackConfig:
     pitch_reference_rad: float  # ψ_pend = pitch − this
     tilt_time_constant_s: float  # first-order low-pass on the IMU tilt
     g_limit: float  # |g| clip (internal units; g = 8 ≈ +40 % radius)
-    reset_phase_rad: float  # right Hip2 oscillator 0 phase at right touchdown (learned gait)
-    reset_strength: float  # fraction of the phase error removed at a reset
+    reset_phase_rad: float  # right Hip2 oscillator 0 phase at right touchdown (learned gait, forward)
+    reset_strength: float  # fraction of the phase error removed at a reset ("reset", the paper's)
+    # ours ("amplitude"): amplitude factor 1 + k·max(|ζ| − 1, 0) per DOF (both legs)
+    amp_slope_hip1: float
+    amp_slope_hip2: float
+    amp_slope_knee: float
+    amp_slope_ankle1: float
+    amp_slope_ankle2: float
+    # ... and 1 + k·max(1 − |ζ|, 0) below |ζ| = 1 (slow walking)
+    amp_slow_slope_hip1: float
+    amp_slow_slope_hip2: float
+    amp_slow_slope_knee: float
+    amp_slow_slope_ankle1: float
+    amp_slow_slope_ankle2: float
+    # ours ("reset_both")
+    reset_both_strength: float  # κ of the soft reset at either foot's touchdown
+    reset_phase_backward_rad: float  # right Hip2 oscillator 0 phase at right touchdown walking backward
+    reset_min_abs_zeta: float  # no reset_both while |applied ζ| is below this (reversing through ζ = 0)
+    # ours ("heading")
+    heading_gain: float  # hip-yaw amplitude u (rad) per rad of heading error
+    heading_limit_rad: float  # |u| clip
+    heading_time_constant_s: float  # low-pass on the heading error (the gait's own yaw sway)
+    heading_reference: str  # "handover": the yaw when feedback takes over | "start": the first observed yaw
 
     def __post_init__(self) -> None:
         if self.lateral_mode not in ("abs", "signed"):
             raise ValueError(f"lateral_mode must be 'abs' or 'signed', got {self.lateral_mode!r}")
-        if not (0.0 < self.reset_strength <= 1.0):
-            raise ValueError(f"reset_strength must be in (0, 1], got {self.reset_strength}")
+        if self.heading_reference not in ("handover", "start"):
+            raise ValueError(f"heading_reference must be 'handover' or 'start', "
+                             f"got {self.heading_reference!r}")
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name in ("lateral_mode", "heading_reference"):
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{f.name} must be a finite number, got {v!r}")
+        for name in ("reset_strength", "reset_both_strength"):
+            if not (0.0 < getattr(self, name) <= 1.0):
+                raise ValueError(f"{name} must be in (0, 1], got {getattr(self, name)}")
+        for name in ("gain_scale", "g_limit", "tilt_time_constant_s", "heading_gain", "heading_limit_rad",
+                     "heading_time_constant_s", "reset_min_abs_zeta"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.heading_limit_rad > 0.5:
+            raise ValueError(f"heading_limit_rad must be <= 0.5 rad (hip-yaw offsets), "
+                             f"got {self.heading_limit_rad}")
+        if abs(self.lateral_sign) != 1.0:
+            raise ValueError(f"lateral_sign must be +1 or -1, got {self.lateral_sign}")
+        for name in ("reset_phase_rad", "reset_phase_backward_rad"):
+            if abs(getattr(self, name)) > math.pi:
+                raise ValueError(f"{name} must be in [-pi, pi], got {getattr(self, name)}")
+        for name in (f"amp_{w}slope_{j}" for w in ("", "slow_")
+                     for j in ("hip1", "hip2", "knee", "ankle1", "ankle2")):
+            if abs(getattr(self, name)) > 2.0:
+                raise ValueError(f"{name} must be in [-2, 2], got {getattr(self, name)}")
 
     @classmethod
     def load(cls, path: str | None = None, **overrides: object) -> FeedbackConfig:
-        import yaml
-
-        from cpg_walker.paths import config_path
-
-        p = path or config_path("feedback.yaml")
-        with open(p, encoding="utf-8") as fh:
-            d = yaml.safe_load(fh) or {}
+        d, p = _read_yaml(path)
+        d.pop("pathways", None)
         known = {f.name for f in fields(cls)}
         unknown = sorted((set(d) | set(overrides)) - known)
         if unknown:
@@ -93,6 +158,41 @@ class FeedbackConfig:
         if missing:
             raise ValueError(f"{p}: missing key(s) {missing}")
         return cls(**d)
+
+
+def _read_yaml(path: str | None) -> tuple[dict, str]:
+    import yaml
+
+    from cpg_walker.paths import config_path
+
+    p = path or config_path("feedback.yaml")
+    with open(p, encoding="utf-8") as fh:
+        d = yaml.safe_load(fh) or {}
+    if not isinstance(d, dict):
+        raise ValueError(f"{p}: expected a mapping")
+    return d, str(p)
+
+
+def check_pathways(names: object) -> tuple[str, ...]:
+    """The validated pathway tuple (unknown names, and "reset" with "reset_both", are refused)."""
+    if isinstance(names, str):
+        raise ValueError(f"feedback pathways must be a list of names, got the string {names!r}")
+    names = tuple(names)  # type: ignore[arg-type]
+    bad = [p for p in names if p not in PATHWAYS]
+    if bad:
+        raise ValueError(f"unknown feedback pathway(s) {bad}; choose from {list(PATHWAYS)}")
+    if "reset" in names and "reset_both" in names:
+        raise ValueError("feedback pathways 'reset' and 'reset_both' both reset at right touchdown: "
+                         "choose one")
+    return tuple(dict.fromkeys(names))
+
+
+def default_pathways(path: str | None = None) -> tuple[str, ...]:
+    """The pathways feedback "on" closes by default: config/feedback.yaml's ``pathways``."""
+    d, p = _read_yaml(path)
+    if "pathways" not in d:
+        raise ValueError(f"{p}: missing key 'pathways'")
+    return check_pathways(d["pathways"])
 
 
 # ------------------------------------------------------------------------------------------- the laws
@@ -166,33 +266,155 @@ def phase_reset(state: np.ndarray, omega: np.ndarray, target: float, ref: tuple[
     return d
 
 
+# ------------------------------------------------------------------------------------------- ours
+def amplitude_factors(zeta: float, cfg: FeedbackConfig) -> np.ndarray:
+    """(10,) per-DOF amplitude factors ("amplitude"), >= 0: 1 + k_b·max(|ζ| − 1, 0) above |ζ| = 1,
+    1 + k_slow,b·max(1 − |ζ|, 0) below (1 at |ζ| = 1)."""
+    fast, slow = max(abs(zeta) - 1.0, 0.0), max(1.0 - abs(zeta), 0.0)
+    f = np.ones(len(CONTROLLED_JOINTS))
+    for dofs, j in ((HIP1, "hip1"), (HIP2, "hip2"), (KNEE, "knee"), (ANKLE1, "ankle1"), (ANKLE2, "ankle2")):
+        k, k_slow = getattr(cfg, f"amp_slope_{j}"), getattr(cfg, f"amp_slow_slope_{j}")
+        f[list(dofs)] = max(1.0 + k * fast + k_slow * slow, 0.0)
+    return f
+
+
+def touchdown_phase(zeta: float, cfg: FeedbackConfig) -> float:
+    """Phase of the right Hip2 main oscillator at right touchdown for the walking direction sign(ζ)."""
+    return cfg.reset_phase_rad if zeta >= 0 else cfg.reset_phase_backward_rad
+
+
+def yaw_from_quat(q: np.ndarray) -> float:
+    """Heading (rad, about world z, counter-clockwise = left) of the chest's x axis from (w, x, y, z)."""
+    w, x, y, z = (float(v) for v in q)
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def hip_yaw_offsets(u: float, theta_ref: float, phi_td: float,
+                    dtheta: float) -> tuple[np.ndarray, np.ndarray]:
+    """(left, right) hip-yaw (q, q̇) of the heading pathway: q_R = u·cos(θ − φ_TD) = −q_L (module
+    docstring); ``dtheta`` = dθ_ref/dt (rad/s)."""
+    c, sn = math.cos(theta_ref - phi_td), math.sin(theta_ref - phi_td)
+    q = np.array([-u * c, u * c])
+    qd = np.array([u * sn * dtheta, -u * sn * dtheta])
+    return q, qd
+
+
 # ------------------------------------------------------------------------------------------- controller
 class FeedbackController:
-    """Turns sensor readings into the eqs 14–18 g vector and right-touchdown reset events."""
+    """Turns sensor readings into the pathways' actions: the eqs 14–18 g vector, touchdown events for
+    the resets, amplitude factors and the heading pathway's hip-yaw amplitude. ``observe`` is fed every
+    control tick; ``weight`` ∈ [0, 1] scales every action; ``set_pathways``/``set_config``/
+    ``set_turn_rate`` may be called between ticks."""
 
-    def __init__(self, cfg: FeedbackConfig, pathways: tuple[str, ...] = PATHWAYS):
-        bad = [p for p in pathways if p not in PATHWAYS]
-        if bad:
-            raise ValueError(f"unknown feedback pathway(s) {bad}; choose from {list(PATHWAYS)}")
+    def __init__(self, cfg: FeedbackConfig, pathways: tuple[str, ...] | None = None):
         self.cfg = cfg
-        self.pathways = tuple(pathways)
+        self.pathways = default_pathways() if pathways is None else check_pathways(pathways)
         self.tilt = LowPass(cfg.tilt_time_constant_s)
         self.touch = TouchdownDetector()
         self.psi = (0.0, 0.0)
+        self.yaw = 0.0  # unwrapped IMU yaw (rad)
+        self.gyro = np.zeros(3)
         self._t: float | None = None
+        self._weight = 1.0
+        self.turn_rate = 0.0  # rad/s, commanded (a later /cmd_vel); advances the heading reference
+        self.heading_ref: float | None = None  # rad, None until captured (``capture_heading``)
+        self._herr = LowPass(cfg.heading_time_constant_s)
+        self.heading_error = 0.0  # filtered (rad)
+        self.touchdowns = (False, False)  # (left, right) events of the last observe
         self.resets: list[tuple[float, float]] = []  # (t, Δ rad)
-        #: in [0, 1]: scales every pathway's action (g, the reset's shift); cpg_node fades it out when
-        #: the sensor data goes stale
-        self.weight = 1.0
 
-    def observe(self, t: float, tilt: tuple[float, float], loads: tuple[float, float]) -> bool:
-        """Filter the (roll, pitch) tilt; True if the right foot just touched down."""
-        dt = 0.0 if self._t is None else t - self._t
-        self._t = t
-        roll, pitch = self.tilt.update(np.array(tilt, dtype=float), max(dt, 0.0))
+    # ---- run-time settings
+    @property
+    def weight(self) -> float:
+        return self._weight
+
+    @weight.setter
+    def weight(self, w: float) -> None:
+        w = float(w)
+        if not (0.0 <= w <= 1.0):
+            raise ValueError(f"feedback weight must be in [0, 1], got {w}")
+        self._weight = w
+
+    def set_pathways(self, names) -> None:
+        self.pathways = check_pathways(names)
+
+    def set_config(self, cfg: FeedbackConfig) -> None:
+        if not isinstance(cfg, FeedbackConfig):
+            raise ValueError(f"set_config needs a FeedbackConfig, got {type(cfg).__name__}")
+        self.cfg = cfg
+        self.tilt.T = cfg.tilt_time_constant_s
+        self._herr.T = cfg.heading_time_constant_s
+
+    def set_turn_rate(self, rate: float) -> None:
+        rate = float(rate)
+        if not (math.isfinite(rate) and abs(rate) <= 1.0):
+            raise ValueError(f"turn_rate must be finite and within ±1 rad/s, got {rate}")
+        self.turn_rate = rate
+
+    def capture_heading(self) -> None:
+        """Take the current (observed) yaw as the heading reference (FeedbackGaitSource: at the hand-over or
+        at the first observation, ``heading_reference``)."""
+        self.heading_ref = self.yaw
+        self._herr.y = None
+
+    # ---- sensing
+    def observe(self, t: float, quat_wxyz: np.ndarray, gyro: np.ndarray, loads: tuple[float, float]) -> None:
+        """One control tick's readings: chest IMU orientation (w, x, y, z) and angular velocity (rad/s,
+        as on /imu), (left, right) sole loads (N). Updates the filtered tilt ψ, the yaw, the heading
+        error and ``touchdowns``."""
+        q = np.asarray(quat_wxyz, dtype=float)
+        if q.shape != (4,) or not np.all(np.isfinite(q)) or not (0.5 < float(q @ q) < 2.0):
+            raise ValueError(f"observe: quat_wxyz must be a finite unit quaternion (w, x, y, z), got {q}")
+        dt = 0.0 if self._t is None else max(t - self._t, 0.0)
+        roll, pitch = self.tilt.update(np.array(tilt_from_quat(q)), dt)
         self.psi = (float(roll), float(pitch) - self.cfg.pitch_reference_rad)
-        _, right = self.touch.update(t, loads)
-        return right
+        yaw = yaw_from_quat(q)
+        self.yaw = yaw if self._t is None else self.yaw + wrap(yaw - self.yaw)
+        self.gyro = np.asarray(gyro, dtype=float)
+        if self.heading_ref is not None:
+            self.heading_ref += self.turn_rate * dt
+            self.heading_error = float(self._herr.update(np.array([self.heading_ref - self.yaw]), dt)[0])
+        self._t = t
+        self.touchdowns = self.touch.update(t, loads)
 
+    # ---- actions (all × weight)
     def g(self, zeta: float) -> np.ndarray:
-        return self.weight * feedback_vector(self.psi[0], self.psi[1], zeta, self.cfg, self.pathways)
+        """(10,) g of eqs 14–18 ("lateral", "pendulum")."""
+        g = feedback_vector(self.psi[0], self.psi[1], zeta, self.cfg, self.pathways)
+        return g * self._weight if self._weight != 1.0 else g
+
+    def amplitude(self, zeta: float) -> np.ndarray:
+        """(10,) per-DOF amplitude factors ("amplitude"; ones without it)."""
+        if "amplitude" not in self.pathways:
+            return np.ones(len(CONTROLLED_JOINTS))
+        return 1.0 + self._weight * (amplitude_factors(zeta, self.cfg) - 1.0)
+
+    def reset_events(self, zeta: float) -> list[tuple[float, float]]:
+        """(target phase of the right Hip2 main oscillator, strength) for the touchdowns of the last
+        ``observe``: the paper's right-foot reset, or ours at either foot."""
+        left, right = self.touchdowns
+        out = []
+        w = self._weight
+        if w <= 0.0:
+            return out
+        if "reset" in self.pathways and right:
+            out.append((self.cfg.reset_phase_rad, w * self.cfg.reset_strength))
+        if "reset_both" in self.pathways and abs(zeta) >= self.cfg.reset_min_abs_zeta:
+            phi = touchdown_phase(zeta, self.cfg)
+            k = w * self.cfg.reset_both_strength
+            if right:
+                out.append((phi, k))
+            if left:
+                out.append((wrap(phi + math.pi), k))
+        return out
+
+    def heading_amplitude(self) -> float:
+        """u (rad) of the heading pathway's hip-yaw oscillation (0 without it or before the capture)."""
+        if "heading" not in self.pathways or self.heading_ref is None:
+            return 0.0
+        lim = self.cfg.heading_limit_rad
+        return self._weight * min(max(self.cfg.heading_gain * self.heading_error, -lim), lim)

@@ -3,7 +3,7 @@
 ``CPGGaitSource`` plays the recording's opening steps, hands over to the CPG (start-up transition) and
 then steps the frozen network once per control tick; ``FeedbackGaitSource`` also closes the sensory
 feedback pathways of walker/feedback.py. Both have ``names`` and ``targets(t) -> (q, qd)`` (walker/loop.py's
-TargetSource); the feedback one also ``observe(t, tilt, loads)``.
+TargetSource); the feedback one also ``observe(t, quat_wxyz, gyro, loads)``.
 """
 
 from __future__ import annotations
@@ -16,7 +16,16 @@ from cpg_walker.cpg.hopf import phase
 from cpg_walker.robot.gait_data import GaitPlayback, find_steady_cycle, load_gait
 from cpg_walker.robot.joints import JOINT_NAMES
 from cpg_walker.walker.controller import DOFS, HumanoidCPG
-from cpg_walker.walker.feedback import ANKLE2, KNEE, RIGHT_HIP2, FeedbackController, phase_reset
+from cpg_walker.walker.feedback import (
+    ANKLE2,
+    HIP_YAW,
+    KNEE,
+    RIGHT_HIP2,
+    FeedbackController,
+    hip_yaw_offsets,
+    phase_reset,
+    touchdown_phase,
+)
 
 
 class CPGGaitSource:
@@ -156,11 +165,14 @@ def _smootherstep(u: float) -> tuple[float, float]:
 
 
 class FeedbackGaitSource(CPGGaitSource):
-    """CPGGaitSource with the feedback pathways closed after the hand-over cross-fade.
+    """CPGGaitSource with the feedback pathways (walker/feedback.py) closed after the hand-over cross-fade.
 
-    The loop calls ``observe(t, tilt, loads)`` every control tick before ``targets(t)``. Once the CPG has
-    taken over (t >= handover + blend) the g vector of eqs 14–18 (at the applied ζ) is held over the
-    network steps, and a right touchdown resets the phase (if "reset" is among the pathways)."""
+    The loop calls ``observe(t, quat_wxyz, gyro, loads)`` every control tick before ``targets(t)``. Once
+    the CPG has taken over (t >= handover + blend; the heading reference is captured then, or at the first
+    observation with ``heading_reference: start``) the g vector of
+    eqs 14–18 (at the applied ζ) is held over the network steps, the per-DOF amplitude factors follow the
+    applied ζ, touchdowns reset the phase ("reset": right foot, the paper's; "reset_both": either foot)
+    and the hip yaws get the heading pathway's oscillation."""
 
     trace_dt = 0.01  # s of sim time between g_trace samples
 
@@ -171,21 +183,57 @@ class FeedbackGaitSource(CPGGaitSource):
         self.active_from = self.handover + self.blend
         self.g_trace: list[tuple[float, float, float, float, float]] = []  # t, roll, pitch, g_Ankle2, g_Knee
         self.touchdown_phases: list[float] = []  # right Hip2 oscillator 0 phase at right touchdowns
+        self.touchdown_log: list[tuple[float, float, float]] = []  # (t, applied ζ, that phase), right foot
+        self._yaw_u = 0.0
+        self._yaw_idx = np.array([JOINT_NAMES.index(j) for j in HIP_YAW])
 
-    def observe(self, t: float, tilt: tuple[float, float], loads: tuple[float, float]) -> None:
-        right_td = self.fb.observe(t, tilt, loads)
+    def observe(self, t: float, quat_wxyz: np.ndarray, gyro: np.ndarray, loads: tuple[float, float]) -> None:
+        fb = self.fb
+        fb.observe(t, quat_wxyz, gyro, loads)
+        if fb.heading_ref is None and (t >= self.active_from or fb.cfg.heading_reference == "start"):
+            fb.capture_heading()
         if t < self.active_from:
             return
         self._advance(t)  # the network at t before the reset / the new g
-        g = self.fb.g(self.ctrl.zeta)
+        z = self.ctrl.zeta
+        g = fb.g(z)
         self.feedback_g = g if np.any(g) else None
-        if right_td:
-            st = self.ctrl.net.state
-            self.touchdown_phases.append(phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0]))
-        if right_td and "reset" in self.fb.pathways and self.fb.weight > 0:
-            d = phase_reset(self.ctrl.net.state, self.ctrl.net.omega, self.fb.cfg.reset_phase_rad,
-                            strength=self.fb.cfg.reset_strength * self.fb.weight)
-            self.fb.resets.append((t, d))
+        self.ctrl.set_dof_amplitude_scale(fb.amplitude(z))
+        st = self.ctrl.net.state
+        if fb.touchdowns[1]:
+            ph = phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0])
+            self.touchdown_phases.append(ph)
+            self.touchdown_log.append((t, z, ph))
+        for target, strength in fb.reset_events(z):
+            d = phase_reset(st, self.ctrl.net.omega, target, strength=strength)
+            fb.resets.append((t, d))
+        self._yaw_u = fb.heading_amplitude()
         if t >= self._next_trace - 1e-9:  # one sample per trace_dt of sim time, whatever the tick rate
-            self.g_trace.append((t, *self.fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
+            self.g_trace.append((t, *fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
             self._next_trace = t + self.trace_dt
+
+    def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        q, qd = super().targets(t)
+        if self._yaw_u != 0.0 and t >= self.active_from:
+            q, qd = q.copy(), qd.copy()
+            self._add_hip_yaw(q, qd, 0.0)
+        return q, qd
+
+    def forecast(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`CPGGaitSource.forecast` plus the heading pathway's hip-yaw oscillation at the held u (its
+        phase advanced at the current frequency)."""
+        q, qd = super().forecast(times)
+        if self._yaw_u != 0.0:
+            times = np.asarray(times, dtype=float).reshape(-1)
+            for k in np.flatnonzero(times >= self.active_from):
+                self._add_hip_yaw(q[k], qd[k], max(float(times[k]) - self._t_net, 0.0))
+        return q, qd
+
+    def _add_hip_yaw(self, q: np.ndarray, qd: np.ndarray, ahead_s: float) -> None:
+        net = self.ctrl.net
+        st = net.state
+        w = float(net.frequencies()[RIGHT_HIP2, 0])
+        theta = phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0]) + w * ahead_s
+        dq, dqd = hip_yaw_offsets(self._yaw_u, theta, touchdown_phase(self.ctrl.zeta, self.fb.cfg), w)
+        q[self._yaw_idx] += dq
+        qd[self._yaw_idx] += dqd

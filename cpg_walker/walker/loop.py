@@ -4,10 +4,10 @@ The PID runs as an explicit torque law at ``rate_hz`` on joint state that is ``d
 torque is held between ticks - the way it runs as a ROS node. By default the rate is the sim node's (one
 ``control_period``, config/sim.yaml) and the delay one such period (the graph's round trip in real time).
 The target source is pluggable: any object with ``names`` and ``targets(t) -> (q, qd)`` (the recorded
-gait, a CPG). A source that also has ``observe(t, tilt, loads)`` gets, at every control tick before
-``targets(t)``, the chest IMU tilt (roll, pitch) in rad computed from the IMU orientation quaternion and
+gait, a CPG). A source that also has ``observe(t, quat_wxyz, gyro, loads)`` gets, at every control tick
+before ``targets(t)``, the chest IMU orientation quaternion (w, x, y, z) and angular velocity (rad/s) and
 the (left, right) sole loads in N — the readings a ROS node gets from /imu and /foot_load (sensory
-feedback, cpg/feedback.py).
+feedback, walker/feedback.py).
 """
 
 from __future__ import annotations
@@ -134,7 +134,8 @@ def run_replay(
             j = b - delay_steps
             q, v = kept.pop(j) if j > 0 else kept[0]
             if observe is not None:
-                observe(data.time - t0, sim.imu().tilt(), sim.sole_loads())
+                imu = sim.imu()
+                observe(data.time - t0, imu.quat, imu.gyro, sim.sole_loads())
             qt, vt = targets(data.time - t0)
             if all_joints:
                 set_torque(law(qt, vt, q, v), within)
@@ -176,6 +177,10 @@ def summarize(r: ReplayResult, start_xy: np.ndarray | None = None, period_s: flo
         "distance_m": round(distance, 4),
         "lateral_drift_m": round(float(d @ left), 4),
         "heading_change_deg": round(math.degrees(float(r.heading[-1] - h0)), 2),
+        # the torso yaws a few degrees within each stride: the mean over the last stride (period_s, else
+        # 2.5 s, the learned stride) shows where the walk is heading without that sway
+        "heading_change_stride_mean_deg": round(math.degrees(float(
+            np.mean(r.heading[r.t >= r.t[-1] - (period_s or 2.5)]) - h0)), 2),
         "mean_speed_mps": round(distance / r.duration_s, 4) if r.duration_s > 0 else 0.0,
         "steps": int(steps),
         "min_torso_height_m": round(float(r.base_z.min()), 4),
