@@ -317,3 +317,14 @@ def test_pid_gains_are_runtime_parameters_and_validated(graph, probe):
     from cpg_walker.nodes.graph import domain_is_quiet
 
     assert not domain_is_quiet(graph.domain_id, wait=ANSWER_S)
+
+
+def test_lockstep_pid_stops_waiting_for_a_first_target_that_never_comes(graph, probe):
+    """No target source: pid_node (lockstep, wait_for_targets) waits `startup_wait` for the first target,
+    then holds the posture and answers, although the sim re-sends the state more often than that (a re-sent
+    state must not restart the wait: it did, and the graph hung at 0 s)."""
+    graph.start("pid_node", lockstep=True, wait_for_targets=True, startup_wait=1.0, target_wait=1.0)
+    graph.start("sim_node", pacing="lockstep", duration=0.1, lockstep_resend=0.05)
+    assert graph.wait("sim_node", timeout=sim_deadline(0.1)) == 0, graph.procs["sim_node"].log()[-2000:]
+    pid = graph.procs["pid_node"]
+    probe.wait(lambda: "targets stale" in pid.log(), "pid_node's 'targets stale' warning")

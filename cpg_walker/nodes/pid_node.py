@@ -230,7 +230,8 @@ class PidNode(Node):
             return  # older than what was answered: stale duplicate
         self.latest_state_ns = max(self.latest_state_ns, t)
         if self._must_wait(t):
-            self.pending = (t, q, v, time.monotonic())
+            if self.pending is None or self.pending[0] != t:  # a re-sent state keeps the wait's start
+                self.pending = (t, q, v, time.monotonic())
             return
         self._answer(t, q, v)
 

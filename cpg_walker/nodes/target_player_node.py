@@ -68,7 +68,9 @@ class TargetPlayerNode(Node):
     def _on_clock(self, msg: Clock) -> None:
         self.activity.tick()
         t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
-        if t_ns != self.sent_ns:  # not sent ahead (first tick, a gap) or a re-sent tick: send it
+        # not sent ahead (first tick, a gap), or a re-sent tick (the first one included: its target may
+        # have gone out before the controller's subscription was matched): send it
+        if t_ns != self.sent_ns or t_ns == self.last_tick_ns:
             self._publish(t_ns)
         if self.lookahead and self.last_tick_ns is not None and t_ns > self.last_tick_ns:
             # the target is a function of its stamp alone, so sending the next period's now is
