@@ -22,12 +22,14 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test"]),
-    package_data={PACKAGE: ["robot/*.xml", "robot/data/*.csv", "robot/data/*.md"]},
+    package_data={PACKAGE: ["robot/*.xml", "robot/*.urdf", "robot/data/*.csv", "robot/data/*.md"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
+        # the URDF generated from the MJCF (one file: the package's copy, also beside the MJCF)
+        (f"share/{PACKAGE}/urdf", [f"{PACKAGE}/robot/hoap2.urdf"]),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

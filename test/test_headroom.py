@@ -85,7 +85,7 @@ def test_serialized_sensor_messages_equal_messages_built_field_by_field():
 
     rng = np.random.default_rng(7)
     clock, imu = ClockBuilder(), ImuBuilder("imu", 1e-9, 2e-6, 3e-4)
-    wrench, odom = WrenchBuilder("lleg_sole"), OdometryBuilder("world", "torso")
+    wrench, odom = WrenchBuilder("l_sole"), OdometryBuilder()
     for ns in STAMPS:
         sec, nsec = divmod(ns, 1_000_000_000)
         c = Clock()
@@ -106,7 +106,7 @@ def test_serialized_sensor_messages_equal_messages_built_field_by_field():
 
         f, t = _values(rng, 3), _values(rng, 3)
         w = WrenchStamped()
-        w.header.frame_id = "lleg_sole"
+        w.header.frame_id = "l_sole"
         w.header.stamp.sec, w.header.stamp.nanosec = sec, nsec
         (w.wrench.force.x, w.wrench.force.y, w.wrench.force.z) = f.tolist()
         (w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z) = t.tolist()
@@ -116,7 +116,7 @@ def test_serialized_sensor_messages_equal_messages_built_field_by_field():
         quat = rng.normal(size=4)
         quat /= np.linalg.norm(quat)
         o = Odometry()
-        o.header.frame_id, o.child_frame_id = "world", "torso"
+        o.header.frame_id, o.child_frame_id = "odom", "base_link"
         o.header.stamp.sec, o.header.stamp.nanosec = sec, nsec
         pp, po = o.pose.pose.position, o.pose.pose.orientation
         pp.x, pp.y, pp.z = pos.tolist()

@@ -58,15 +58,15 @@ def test_malformed_sensor_samples_are_refused_with_a_reason():
                                    ("imu", (1, 0, 0, 0), (0, math.inf, 0), "non-finite"),
                                    ("imu", (0, 0, 0, 0), (0, 0, 0), "norm"),
                                    ("imu", (2, 0, 0, 0), (0, 0, 0), "norm"),
-                                   ("torso", (1, 0, 0, 0), (0, 0, 0), "frame"),
+                                   ("base_link", (1, 0, 0, 0), (0, 0, 0), "frame"),
                                    ("imu", (1, 0, 0), (0, 0, 0), "4-value")):
         with pytest.raises(ValueError, match=why):
             validate_imu(frame, "imu", quat, gyro)
-    assert validate_load("lleg_sole", "lleg_sole", 12.5) == 12.5
+    assert validate_load("l_sole", "l_sole", 12.5) == 12.5
     with pytest.raises(ValueError, match="non-finite"):
-        validate_load("lleg_sole", "lleg_sole", math.nan)
+        validate_load("l_sole", "l_sole", math.nan)
     with pytest.raises(ValueError, match="frame"):
-        validate_load("rleg_sole", "lleg_sole", 1.0)
+        validate_load("r_sole", "l_sole", 1.0)
 
 
 def test_pathway_list_names_the_problem():
@@ -137,10 +137,10 @@ class StandIn:
             if self.bad_imu == "nan":
                 imu.orientation.x = math.nan
             elif self.bad_imu == "frame":
-                imu.header.frame_id = "torso"
+                imu.header.frame_id = "base_link"
             self.bad_imu = None
             self.imu.publish(imu)
-        for pub, frame in zip(self.feet, ("lleg_sole", "rleg_sole"), strict=True):
+        for pub, frame in zip(self.feet, ("l_sole", "r_sole"), strict=True):
             w = self.Wrench()
             w.header.stamp.sec, w.header.stamp.nanosec = sec, nsec
             w.header.frame_id = frame
@@ -226,7 +226,7 @@ def test_feedback_parameters_and_stale_sensor_fade(graph, probe):
     until(lambda t, v: t > t_back and v["feedback"] == "active" and float(v["feedback_weight"]) == 1.0,
           "active again at weight 1")
     log = cpg.log()
-    assert "dropped /imu: non-finite" in log and "dropped /imu: frame 'torso'" in log, log[-2000:]
+    assert "dropped /imu: non-finite" in log and "dropped /imu: frame 'base_link'" in log, log[-2000:]
     assert "feedback active -> fading" in log and "fading -> stale" in log
     targets = [m for _, m in probe.received["/joint_targets"]]
     assert targets and all(np.isfinite(m.position).all() and np.isfinite(m.velocity).all() for m in targets)

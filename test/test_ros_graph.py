@@ -132,7 +132,8 @@ def test_topics_types_rates_services_and_fall_status(graph, probe):
     total = sum(got[f"/foot_load/{s}"][-1][1].wrench.force.z for s in ("left", "right"))
     assert total == pytest.approx(7.16 * 9.81, rel=0.15)
     odom = got["/odom/ground_truth"][-1][1]
-    assert odom.child_frame_id == "torso" and 0.25 < odom.pose.pose.position.z < 0.32
+    assert (odom.header.frame_id, odom.child_frame_id) == ("odom", "base_link")
+    assert 0.25 < odom.pose.pose.position.z < 0.32
     assert got["/sim/fallen"][-1][1].data is False
     diag = got["/diagnostics"][-1][1].status[0]
     assert diag.name == "cpg_walker/sim" and diag.level == DiagnosticStatus.OK
@@ -328,3 +329,30 @@ def test_lockstep_pid_stops_waiting_for_a_first_target_that_never_comes(graph, p
     assert graph.wait("sim_node", timeout=sim_deadline(0.1)) == 0, graph.procs["sim_node"].log()[-2000:]
     pid = graph.procs["pid_node"]
     probe.wait(lambda: "targets stale" in pid.log(), "pid_node's 'targets stale' warning")
+
+
+def test_robot_description_reaches_a_late_subscriber(graph, probe):
+    """sim_node publishes the shipped URDF once, transient local: a subscriber that joins after it was
+    published still gets it (as robot_state_publisher's and RViz's do), and it parses to the same robot.
+    The sim waits for a controller (none here): the description is there before the first period."""
+    import xml.etree.ElementTree as ET
+
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+
+    from cpg_walker.robot.urdf import read_urdf
+
+    graph.start("sim_node", pacing="lockstep")
+    probe.wait(lambda: probe.node.count_publishers("/robot_description") > 0, "sim_node's /robot_description",
+               START_S)
+    assert probe.node.count_subscribers("/robot_description") == 0  # nobody listened when it was published
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    probe.listen("/robot_description", String, qos=latched)
+    probe.wait(lambda: probe.received["/robot_description"], "the URDF on /robot_description")
+    text = probe.received["/robot_description"][0][1].data
+    assert text == read_urdf()
+    robot = ET.fromstring(text)
+    assert robot.get("name") == "hoap2" and robot.find("link").get("name") == "base_link"
+    assert {j.get("name") for j in robot.findall("joint") if j.get("type") != "fixed"} == set(JOINT_NAMES)
+    assert graph.procs["sim_node"].popen.poll() is None

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import TransformStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
@@ -30,6 +30,9 @@ from cpg_walker.nodes.validation import (
     validate_joint_command,
     validate_joint_trajectory,
 )
+from cpg_walker.robot.frames import BASE_LINK, ODOM_FRAME, Transform
+from cpg_walker.robot.frames import FOOT_LOAD_FRAMES as FOOT_LOAD_FRAMES  # /foot_load/<side>: (side, frame)
+from cpg_walker.robot.frames import IMU_FRAME as IMU_FRAME  # frame of /imu (the chest IMU site)
 from cpg_walker.robot.trajectory import Trajectory
 
 #: Marker stamp (sec, nanosec) and the marker doubles' base: values no message field holds by chance.
@@ -38,10 +41,6 @@ _MARK_BASE = -1.2345678901234567e-200
 _STAMP = struct.Struct("=iI")  # builtin_interfaces/Time, native byte order as the middleware writes it
 
 
-#: Frame of the /imu messages (the chest IMU site of the model).
-IMU_FRAME = "imu"
-#: /foot_load/<side> topics' sides and the frames of their wrenches (the model's sole sites).
-FOOT_LOAD_FRAMES = (("left", "lleg_sole"), ("right", "rleg_sole"))
 
 
 def darray(x: np.ndarray) -> array.array:
@@ -256,7 +255,7 @@ class OdometryBuilder:
     ``child_frame_id`` (ROS convention). Covariances are zero: the values are exact (ground truth, not
     an estimate)."""
 
-    def __init__(self, frame_id: str = "world", child_frame_id: str = "torso"):
+    def __init__(self, frame_id: str = ODOM_FRAME, child_frame_id: str = BASE_LINK):
         s = self._s = _Serialized()
         m = _with_mark_stamp(Odometry())
         m.header.frame_id = frame_id
@@ -279,6 +278,17 @@ class OdometryBuilder:
         R = _quat_to_matrix(w, x, y, z)
         s.doubles("twist", np.concatenate([R.T @ lin_world, R.T @ ang_world]), 6)
         return bytes(s.buf)
+
+
+def transform_stamped(ns: int, t: Transform) -> TransformStamped:
+    """A /tf entry: ``t.child``'s pose in ``t.parent`` (robot.frames.Transform), stamped ``ns``."""
+    msg = TransformStamped()
+    msg.header.stamp = stamp(ns)
+    msg.header.frame_id, msg.child_frame_id = t.parent, t.child
+    tr, q = msg.transform.translation, msg.transform.rotation
+    tr.x, tr.y, tr.z = (float(v) for v in t.translation)
+    q.w, q.x, q.y, q.z = (float(v) for v in t.quat_wxyz)
+    return msg
 
 
 def _quat_to_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:

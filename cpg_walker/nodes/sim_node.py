@@ -26,7 +26,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
-from std_msgs.msg import Bool
+from std_msgs.msg import Bool, String
 from std_srvs.srv import Trigger
 
 from cpg_walker.nodes.messages import (
@@ -39,6 +39,7 @@ from cpg_walker.nodes.messages import (
     WrenchBuilder,
     read_joint_command,
     stamp_ns,
+    transform_stamped,
 )
 from cpg_walker.nodes.runtime import (
     PACINGS,
@@ -58,21 +59,30 @@ from cpg_walker.nodes.runtime import (
 )
 from cpg_walker.nodes.validation import check_finite_scalar, period_ns, reason_key
 from cpg_walker.robot.contact import sole_wrenches
+from cpg_walker.robot.frames import odom_transform
 from cpg_walker.robot.hoap2 import Hoap2Sim
 from cpg_walker.robot.joints import JOINT_NAMES
 from cpg_walker.robot.pusher import Pusher
 from cpg_walker.robot.run_record import RunRecord
+from cpg_walker.robot.urdf import read_urdf
+
+try:  # tf2_msgs is not on PyPI: a pip-only install has no live /tf (recordings carry /tf, see the docs)
+    from tf2_msgs.msg import TFMessage
+except ImportError:
+    TFMessage = None
 
 INTERFACE = """\
 publishes: /clock (rosgraph_msgs/Clock), /joint_states (sensor_msgs/JointState: position, velocity,
   effort of all 25 joints), /imu (sensor_msgs/Imu, frame 'imu'), /foot_load/left and /foot_load/right
   (geometry_msgs/WrenchStamped, sole frames), /odom/ground_truth (nav_msgs/Odometry, evaluation only),
-  /sim/fallen (std_msgs/Bool, latched), /diagnostics (diagnostic_msgs/DiagnosticArray)
+  /sim/fallen (std_msgs/Bool, latched), /diagnostics (diagnostic_msgs/DiagnosticArray),
+  /robot_description (std_msgs/String: the URDF, latched; with publish_description), /tf (tf2_msgs/TFMessage:
+  odom -> base_link each period; only where tf2_msgs is installed, i.e. a ROS install)
 subscribes: /joint_torques (sensor_msgs/JointState: name + effort in N*m, stamp = the state it answers)
 services: ~/reset, ~/push (std_srvs/Trigger)
 parameters: pacing (realtime|fast|lockstep), control_period (s), real_time_factor, duration (sim s,
-  0 = run until stopped), stop_on_fall, wait_for_controller, lockstep_resend and late_torque_wait
-  (wall s), max_torque_age (sim s), odom_period,
+  0 = run until stopped), publish_description, stop_on_fall, wait_for_controller, lockstep_resend and
+  late_torque_wait (wall s), max_torque_age (sim s), odom_period,
   diagnostics_period (sim s), imu_variance_floor, push.force [N,N,N], push.body, push.duration (s),
   record_path, record_period (s), realtime_priority, nice, cpu_affinity (OS scheduling, realtime pacing)"""
 
@@ -111,6 +121,8 @@ class SimNode(Node):
                                                                   0.01, 100.0)))
         self.duration_ns = round(p("duration", float_param("sim s to run, then exit (0 = until stopped)",
                                                            0.0, 1e6, read_only=True)) * 1e9)
+        describe = bool(p("publish_description", bool_param(
+            "publish the URDF on /robot_description (off when robot_state_publisher does)", read_only=True)))
         self.stop_on_fall = bool(p("stop_on_fall", bool_param("exit when the robot has fallen",
                                                                read_only=True)))
         self.wait_first = bool(p("wait_for_controller", bool_param(
@@ -163,6 +175,10 @@ class SimNode(Node):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_fallen = self.create_publisher(Bool, "/sim/fallen", latched)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        if describe:  # once: transient local hands it to subscribers that join later
+            self.pub_description = self.create_publisher(String, "/robot_description", latched)
+            self.pub_description.publish(String(data=read_urdf()))
+        self.pub_tf = None if TFMessage is None else self.create_publisher(TFMessage, "/tf", 100)
         self.hot = HotPath(self, [self.create_subscription(JointState, "/joint_torques",
                                                            self._on_torque, 10)])
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -174,7 +190,7 @@ class SimNode(Node):
         self.b_js = JointStateBuilder(JOINT_NAMES)
         self.b_imu = ImuBuilder(IMU_FRAME, var["imu_quat"], var["imu_gyro"], var["imu_accel"])
         self.b_feet = [WrenchBuilder(frame) for _, frame in FOOT_LOAD_FRAMES]
-        self.b_odom = OdometryBuilder("world", "torso")
+        self.b_odom = OdometryBuilder()
 
         self.executor_ = SingleThreadedExecutor()
         self.executor_.add_node(self)
@@ -280,6 +296,9 @@ class SimNode(Node):
         self.pub_js.publish(msg)
         self.pub_clock.publish(self.b_clock.fill(t_ns))
         self._publish_sensors(t_ns)
+        if self.pub_tf is not None:
+            self.pub_tf.publish(TFMessage(transforms=[
+                transform_stamped(t_ns, odom_transform(sim.model, sim.data))]))
         if self.k % self.odom_every == 0:
             pos, quat = sim.base_pose()
             lin, ang = sim.base_velocity()

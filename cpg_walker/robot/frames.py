@@ -72,6 +72,13 @@ def site_transforms(model: mujoco.MjModel, data: mujoco.MjData) -> list[Transfor
 
 
 def odom_transform(model: mujoco.MjModel, data: mujoco.MjData) -> Transform:
-    """``odom -> base_link``: the root body's world pose."""
+    """``odom -> base_link``: the root body's world pose, read from its free joint's ``qpos`` - the pose
+    the joint angles in ``qpos`` (/joint_states) go with, also right after ``mj_step`` (whose ``xpos`` is
+    still the pre-step pose); equal to ``xpos``/``xquat`` after ``mj_kinematics``."""
     b = next(i for i in range(1, model.nbody) if int(model.body_parentid[i]) == 0)
-    return Transform(ODOM_FRAME, link_name(model.body(b).name), data.xpos[b].copy(), data.xquat[b].copy())
+    j = int(model.body_jntadr[b])
+    if model.body_jntnum[b] != 1 or model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
+        raise ValueError(f"odom_transform: root body {model.body(b).name!r} needs one free joint")
+    a = int(model.jnt_qposadr[j])
+    return Transform(ODOM_FRAME, link_name(model.body(b).name), data.qpos[a:a + 3].copy(),
+                     data.qpos[a + 3:a + 7].copy())
