@@ -30,6 +30,7 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
         # the URDF generated from the MJCF (one file: the package's copy, also beside the MJCF)
         (f"share/{PACKAGE}/urdf", [f"{PACKAGE}/robot/hoap2.urdf"]),
+        (f"share/{PACKAGE}/rviz", glob("rviz/*.rviz")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

@@ -1,25 +1,48 @@
-"""Launch the CPG walk on a ROS 2 install: sim_node + pid_node + cpg_node. Example:
-``ros2 launch cpg_walker walk.launch.py pacing:=lockstep zeta:=0.9 alpha:=1.1``.
+"""Launch the CPG walk on a ROS 2 install: sim_node + pid_node + cpg_node + robot_state_publisher
+(+ ``ros2 bag record`` with ``record:=true``, + RViz with ``rviz:=true``). Example:
+``ros2 launch cpg_walker walk.launch.py pacing:=lockstep zeta:=1.2 alpha:=1.1 feedback:=false record:=true``.
 
-Each node gets its parameters file from the package's share/config (config/<node name>.yaml: every
-value's one home, e.g. zeta and alpha in cpg.yaml); a launch argument given on the command line overrides
-the file's value (left empty, the file's stands). Without ROS's launch tools (a pip install), use
-``cpg-walker graph`` / ``cpg-walker walk``.
+Each of our nodes gets its parameters file from the package's share/config (config/<node name>.yaml:
+every value's one home, e.g. zeta, alpha and feedback in cpg.yaml); a launch argument given on the
+command line overrides the file's value (left empty, the file's stands). robot_state_publisher gets the
+URDF generated from the MJCF (share/cpg_walker/urdf/hoap2.urdf), publishes it on /robot_description and
+turns /joint_states into /tf and /tf_static; sim_node adds odom -> base_link on /tf (so it does not publish
+/robot_description itself here). Without ROS's launch tools (a pip install), use ``cpg-walker graph`` /
+``cpg-walker walk``.
 """
 
 import os
 
 import yaml
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction
 from launch_ros.actions import Node
 
 from launch import LaunchDescription
 
+PACKAGE = "cpg_walker"
+#: The launch arguments (name -> description); all default to "" = the parameters file's value, but
+#: record and rviz ("false").
+ARGUMENTS = {
+    "pacing": "realtime | fast | lockstep (empty: config/sim.yaml's)",
+    "zeta": "cpg_node's frequency ratio in [-2, 2] (empty: config/cpg.yaml's)",
+    "alpha": "cpg_node's amplitude scale in [0, 2] (empty: config/cpg.yaml's)",
+    "feedback": "true | false: cpg_node's sensory feedback pathways (empty: config/cpg.yaml's)",
+    "record": "true: also record every topic with `ros2 bag record -s mcap -a` (sim time)",
+    "record_dir": "the recording's directory (empty: rosbag2's timestamped one in the current directory)",
+    "rviz": "true: also start RViz with share/cpg_walker/rviz/hoap2.rviz",
+}
+OFF_BY_DEFAULT = ("record", "rviz")
+
+
+def share(*parts: str) -> str:
+    """A file of the installed package: share/cpg_walker/<parts>."""
+    return os.path.join(get_package_share_directory(PACKAGE), *parts)
+
 
 def params(node_name: str) -> str:
     """The node's parameters file: share/cpg_walker/config/<node_name>.yaml."""
-    return os.path.join(get_package_share_directory("cpg_walker"), "config", f"{node_name}.yaml")
+    return share("config", f"{node_name}.yaml")
 
 
 def file_value(node_name: str, key: str):
@@ -28,30 +51,54 @@ def file_value(node_name: str, key: str):
         return yaml.safe_load(fh)[node_name]["ros__parameters"][key]
 
 
+def flag(name: str, text: str) -> bool | None:
+    """A true/false launch argument (None when left empty); anything else is an error naming it."""
+    if text == "":
+        return None
+    if text.lower() not in ("true", "false"):
+        raise ValueError(f"launch argument {name}:={text!r}: expected true or false")
+    return text.lower() == "true"
+
+
 def nodes(context) -> list:
-    """The three nodes, each with its file, then the given launch arguments as overrides."""
-    arg = {name: context.launch_configurations.get(name, "") for name in ("pacing", "zeta", "alpha")}
+    """The nodes (each of ours with its file, then the given launch arguments as overrides) and the
+    recorder."""
+    arg = {name: context.launch_configurations.get(name, "") for name in ARGUMENTS}
     pacing = arg["pacing"] or file_value("sim", "pacing")
+    feedback = flag("feedback", arg["feedback"])
     cpg = {"use_sim_time": True, "lockstep": pacing == "lockstep",
-           **{k: float(arg[k]) for k in ("zeta", "alpha") if arg[k]}}
-    return [
-        Node(package="cpg_walker", executable="sim_node", name="sim", output="screen",
-             parameters=[params("sim"), {"use_sim_time": True, "pacing": pacing}]),
-        Node(package="cpg_walker", executable="pid_node", name="pid", output="screen",
+           **{k: float(arg[k]) for k in ("zeta", "alpha") if arg[k]},
+           **({} if feedback is None else {"feedback": feedback})}
+    with open(share("urdf", "hoap2.urdf"), encoding="utf-8") as fh:
+        description = fh.read()
+    out = [
+        Node(package=PACKAGE, executable="sim_node", name="sim", output="screen",
+             parameters=[params("sim"), {"use_sim_time": True, "pacing": pacing,
+                                         "publish_description": False}]),
+        Node(package=PACKAGE, executable="pid_node", name="pid", output="screen",
              parameters=[params("pid"), {"use_sim_time": True, "lockstep": pacing == "lockstep",
                                          "wait_for_targets": True}]),
-        Node(package="cpg_walker", executable="cpg_node", name="cpg", output="screen",
+        Node(package=PACKAGE, executable="cpg_node", name="cpg", output="screen",
              parameters=[params("cpg"), cpg]),
+        Node(package="robot_state_publisher", executable="robot_state_publisher",
+             name="robot_state_publisher", output="screen",
+             parameters=[{"robot_description": description, "use_sim_time": True}]),
     ]
+    if flag("record", arg["record"]):
+        out.append(ExecuteProcess(
+            cmd=["ros2", "bag", "record", "-s", "mcap", "-a", "--use-sim-time",
+                 *(["-o", arg["record_dir"]] if arg["record_dir"] else [])],
+            name="record", output="screen"))
+    if flag("rviz", arg["rviz"]):
+        out.append(Node(package="rviz2", executable="rviz2", name="rviz2", output="screen",
+                        arguments=["-d", share("rviz", "hoap2.rviz")],
+                        parameters=[{"use_sim_time": True}]))
+    return out
 
 
 def generate_launch_description() -> LaunchDescription:
     return LaunchDescription([
-        DeclareLaunchArgument("pacing", default_value="",
-                              description="realtime | fast | lockstep (empty: config/sim.yaml's)"),
-        DeclareLaunchArgument("zeta", default_value="",
-                              description="cpg_node's frequency ratio in [-2, 2] (empty: config/cpg.yaml's)"),
-        DeclareLaunchArgument("alpha", default_value="",
-                              description="cpg_node's amplitude scale in [0, 2] (empty: config/cpg.yaml's)"),
+        *(DeclareLaunchArgument(name, default_value="false" if name in OFF_BY_DEFAULT else "",
+                                description=text) for name, text in ARGUMENTS.items()),
         OpaqueFunction(function=nodes),
     ])

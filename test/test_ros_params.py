@@ -19,6 +19,7 @@ from cpg_walker.nodes.rostools import from_parameter_value
 from cpg_walker.nodes.runtime import NODE_NAMES, params_file
 from cpg_walker.paths import ros_parameters
 from cpg_walker.robot.joints import JOINT_NAMES
+from cpg_walker.robot.urdf import read_urdf
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -193,9 +194,10 @@ def test_cpg_node_reports_its_stage_not_a_phase():
         rclpy.try_shutdown(context=ctx)
 
 
-def _launch_nodes(monkeypatch, name: str, args: dict[str, str]) -> dict[str, dict]:
+def _launch_nodes(monkeypatch, tmp_path, name: str, args: dict[str, str]) -> dict[str, dict]:
     """Run a launch file's node list with stand-ins for launch/launch_ros (not installed here): each
-    Node's name -> its keyword arguments. The share directory is the source tree."""
+    Node's (or ExecuteProcess's) name -> its keyword arguments. The share directory is the source tree,
+    with the URDF where setup.py installs it from."""
     import types
 
     class Stub:
@@ -210,10 +212,17 @@ def _launch_nodes(monkeypatch, name: str, args: dict[str, str]) -> dict[str, dic
     modules["launch"].LaunchDescription = lambda entities: entities
     modules["launch.actions"].DeclareLaunchArgument = Stub
     modules["launch.actions"].OpaqueFunction = Stub
+    modules["launch.actions"].ExecuteProcess = Stub
     modules["launch_ros.actions"].Node = Stub
-    modules["ament_index_python.packages"].get_package_share_directory = lambda pkg: str(REPO)
+    modules["ament_index_python.packages"].get_package_share_directory = lambda pkg: str(share)
     for mod_name, mod in modules.items():
         monkeypatch.setitem(sys.modules, mod_name, mod)
+    share = tmp_path / "share"
+    (share / "urdf").mkdir(parents=True, exist_ok=True)
+    for sub in ("config", "rviz"):
+        if not (share / sub).exists():
+            (share / sub).symlink_to(REPO / sub)
+    (share / "urdf" / "hoap2.urdf").write_text(read_urdf(), encoding="utf-8")
     path = REPO / "launch" / name
     namespace: dict = {"__name__": "launch_file"}
     exec(compile(path.read_text(), str(path), "exec"), namespace)
@@ -224,28 +233,43 @@ def _launch_nodes(monkeypatch, name: str, args: dict[str, str]) -> dict[str, dic
     return {n.kw["name"]: n.kw for n in opaque.kw["function"](context)}
 
 
-def test_launch_files_pass_each_node_its_file_then_the_arguments(monkeypatch):
+def test_launch_files_pass_each_node_its_file_then_the_arguments(monkeypatch, tmp_path):
     """Both launch files give every node config/<node name>.yaml first; a launch argument overrides one
-    value, and without it the file's value stands (no second default in the launch file)."""
-    walk = _launch_nodes(monkeypatch, "walk.launch.py", {})
-    assert set(walk) == {"sim", "pid", "cpg"}
+    value, and without it the file's value stands (no second default in the launch file). The walk also
+    starts robot_state_publisher with the shipped URDF (sim_node then leaves /robot_description to it),
+    and the recorder / RViz when asked."""
+    walk = _launch_nodes(monkeypatch, tmp_path, "walk.launch.py", {})
+    assert set(walk) == {"sim", "pid", "cpg", "robot_state_publisher"}
+    rsp = walk.pop("robot_state_publisher")
+    assert rsp["package"] == rsp["executable"] == "robot_state_publisher"
+    assert rsp["parameters"] == [{"robot_description": read_urdf(), "use_sim_time": True}]
     for name, kw in walk.items():
-        assert kw["parameters"][0] == str(REPO / "config" / f"{name}.yaml")
+        assert kw["parameters"][0] == str(tmp_path / "share" / "config" / f"{name}.yaml")
         assert kw["executable"] == {v: k for k, v in NODE_NAMES.items()}[name]
-    assert "zeta" not in walk["cpg"]["parameters"][1] and "alpha" not in walk["cpg"]["parameters"][1]
+    assert walk["sim"]["parameters"][1]["publish_description"] is False
+    assert not {"zeta", "alpha", "feedback"} & set(walk["cpg"]["parameters"][1])
     file_pacing = ros_parameters("sim.yaml", "sim")["pacing"]
     assert walk["pid"]["parameters"][1]["lockstep"] == (file_pacing == "lockstep")
-    walk = _launch_nodes(monkeypatch, "walk.launch.py", {"zeta": "0.8", "alpha": "1.2", "pacing": "lockstep"})
-    assert walk["cpg"]["parameters"][1]["zeta"] == 0.8 and walk["cpg"]["parameters"][1]["alpha"] == 1.2
+    walk = _launch_nodes(monkeypatch, tmp_path, "walk.launch.py", {
+        "zeta": "0.8", "alpha": "1.2", "pacing": "lockstep", "feedback": "false", "record": "true",
+        "record_dir": "bags/walk", "rviz": "true"})
+    cpg = walk["cpg"]["parameters"][1]
+    assert cpg["zeta"] == 0.8 and cpg["alpha"] == 1.2 and cpg["feedback"] is False
     assert walk["sim"]["parameters"][1]["pacing"] == "lockstep" and walk["pid"]["parameters"][1]["lockstep"]
+    assert walk["record"]["cmd"] == ["ros2", "bag", "record", "-s", "mcap", "-a", "--use-sim-time",
+                                     "-o", "bags/walk"]
+    assert walk["rviz2"]["arguments"] == ["-d", str(tmp_path / "share" / "rviz" / "hoap2.rviz")]
+    assert (tmp_path / "share" / "rviz" / "hoap2.rviz").is_file()
+    with pytest.raises(ValueError, match="feedback:='yes'"):
+        _launch_nodes(monkeypatch, tmp_path, "walk.launch.py", {"feedback": "yes"})
 
-    graph = _launch_nodes(monkeypatch, "sim_pid.launch.py", {"player": "true", "gait": "slow"})
+    graph = _launch_nodes(monkeypatch, tmp_path, "sim_pid.launch.py", {"player": "true", "gait": "slow"})
     assert set(graph) == {"sim", "pid", "target_player"}
     for name, kw in graph.items():
-        assert kw["parameters"][0] == str(REPO / "config" / f"{name}.yaml")
+        assert kw["parameters"][0] == str(tmp_path / "share" / "config" / f"{name}.yaml")
     assert graph["target_player"]["parameters"][1]["gait"] == "slow"
     assert "control_period" not in graph["sim"]["parameters"][1]
-    assert set(_launch_nodes(monkeypatch, "sim_pid.launch.py", {})) == {"sim", "pid"}
+    assert set(_launch_nodes(monkeypatch, tmp_path, "sim_pid.launch.py", {})) == {"sim", "pid"}
 
 
 def test_physics_lives_in_the_model_only():

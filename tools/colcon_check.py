@@ -1,9 +1,10 @@
 """Build cpg_walker with colcon the way a ROS 2 workspace would, and check the install tree has what
 `ros2 run cpg_walker <exe>` and `ros2 launch` look up. Usage: python tools/colcon_check.py [--keep DIR]
 
-Checks: the ament index marker (share/ament_index/resource_index/packages/cpg_walker), package.xml and
-config/ under share/cpg_walker, an executable lib/cpg_walker/<name> for every console script in setup.py,
-the MJCF and gait data inside the installed Python package, and that `ros2 run`'s own lookup
+Checks: the ament index marker (share/ament_index/resource_index/packages/cpg_walker), package.xml,
+config/, launch/, urdf/hoap2.urdf (the same text as the package's) and rviz/ under share/cpg_walker, an
+executable lib/cpg_walker/<name> for every console script in setup.py, the MJCF, URDF and gait data
+inside the installed Python package, and that `ros2 run`'s own lookup
 (ament_index_python.get_package_prefix + lib/<pkg>/<exe>) resolves each executable and that it starts.
 Exit status 0 when all hold; otherwise it names what is missing.
 """
@@ -72,8 +73,15 @@ def main() -> int:
     expect += [prefix / "share" / PKG / "config" / p.name for p in sorted((REPO / "config").glob("*.yaml"))]
     expect += [prefix / "share" / PKG / "launch" / p.name for p in sorted((REPO / "launch").glob("*.py"))]
     expect += [py_site / PKG / "robot" / p.name for p in sorted((REPO / PKG / "robot").glob("*.xml"))]
+    # the URDF (generated from the MJCF: in the Python package for sim_node, in share/ for the launch file
+    # and robot_state_publisher) and the RViz view
+    expect += [py_site / PKG / "robot" / "hoap2.urdf", prefix / "share" / PKG / "urdf" / "hoap2.urdf"]
+    expect += [prefix / "share" / PKG / "rviz" / p.name for p in sorted((REPO / "rviz").glob("*.rviz"))]
     expect += [py_site / PKG / "robot" / "data" / p.name for p in sorted((REPO / PKG / "robot" / "data").glob("*"))]
     problems += [f"missing {p.relative_to(work)}" for p in expect if not p.exists()]
+    urdfs = [prefix / "share" / PKG / "urdf" / "hoap2.urdf", py_site / PKG / "robot" / "hoap2.urdf"]
+    if all(p.exists() for p in urdfs) and urdfs[0].read_bytes() != urdfs[1].read_bytes():
+        problems.append("share/cpg_walker/urdf/hoap2.urdf differs from the Python package's hoap2.urdf")
 
     env = dict(os.environ)
     env["AMENT_PREFIX_PATH"] = f"{prefix}:{env.get('AMENT_PREFIX_PATH', '')}".rstrip(":")
