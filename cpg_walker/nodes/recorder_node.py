@@ -74,7 +74,6 @@ class RecorderNode(Node):
         self.subs: dict[str, object] = {}
         self.skipped: dict[str, str] = {}
         self.hot = HotPath(self, [])
-        self.first_ns: int | None = None
         self.scan()
         self.get_logger().info(f"{READY} {out} ({'sim' if sim_time else 'wall-clock'} time); topics: "
                                f"{', '.join(sorted(self.subs)) or 'none yet'}")
@@ -113,18 +112,17 @@ class RecorderNode(Node):
             self.hot = HotPath(self, list(self.subs.values()))
 
     def _on_message(self, topic: str, data: bytes) -> None:
-        self.bag.write(topic, data)
-        if topic == CLOCK_TOPIC and self.first_ns is None:
-            self.first_ns = self.bag.clock_ns
+        if self.bag.write(topic, data) and self.duration_ns and self.bag.until_ns is None:
+            if not self.bag.sim_time:
+                self.bag.until_ns = time.time_ns() + self.duration_ns
+            elif topic == CLOCK_TOPIC:
+                self.bag.until_ns = self.bag.clock_ns + self.duration_ns
 
     def done(self) -> bool:
-        """``duration`` of bag time recorded (from the first /clock, or the start without sim time)."""
-        if not self.duration_ns:
-            return False
-        if not self.bag.sim_time:
-            self.first_ns = self.first_ns or time.time_ns()
-            return time.time_ns() - self.first_ns >= self.duration_ns
-        return self.first_ns is not None and self.bag.clock_ns - self.first_ns >= self.duration_ns
+        """``duration`` of bag time recorded (from the first /clock, or the first message without sim
+        time)."""
+        until = self.bag.until_ns
+        return until is not None and (self.bag.clock_ns if self.bag.sim_time else time.time_ns()) >= until
 
     def on_exit(self) -> None:
         path = self.bag.close()
@@ -132,8 +130,9 @@ class RecorderNode(Node):
 
 
 def spin_recorder(node: RecorderNode, stopping: list[bool]) -> None:
-    """Take messages until ``stopping[0]`` (a signal) or ``node.done()``, then drain what is still queued
-    (until nothing arrived for 0.3 wall s, at most 5 s); scan for topics every ``scan_period``."""
+    """Take messages until ``stopping[0]`` (a signal) or ``node.done()``, then what is still queued or on
+    its way (until nothing arrived for 0.3 wall s, at most 2 s: a graph stopped first has sent all by
+    then); scan for topics every ``scan_period``."""
     from rclpy.executors import SingleThreadedExecutor
 
     executor = SingleThreadedExecutor(context=node.context)
@@ -151,7 +150,7 @@ def spin_recorder(node: RecorderNode, stopping: list[bool]) -> None:
         if now >= next_scan:
             node.scan()
             next_scan = now + node.scan_period
-    end = time.monotonic() + 5.0
+    end = time.monotonic() + 2.0
     quiet_since = time.monotonic()
     while node.context.ok() and time.monotonic() < end and time.monotonic() - quiet_since < 0.3:
         if node.hot.poll(0.02) if node.subs else 0:

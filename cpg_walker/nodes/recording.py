@@ -125,6 +125,7 @@ class BagRecorder:
         self.first_ns: int | None = None
         self.tf = TfPairs()
         self.path: Path | None = None
+        self.until_ns: int | None = None  # messages of a later bag time are not written (a duration)
 
     def add_topic(self, topic: str, msgtype: str, offered_qos: list | None = None) -> str | None:
         """Record ``topic`` of ``msgtype``; None, or why it cannot be recorded (a type unknown to the
@@ -152,12 +153,15 @@ class BagRecorder:
                 return ns
         return self.clock_ns
 
-    def write(self, topic: str, data: bytes | memoryview) -> None:
-        """One message of an added topic, serialized (CDR) as received."""
+    def write(self, topic: str, data: bytes | memoryview) -> bool:
+        """One message of an added topic, serialized (CDR) as received; False if its bag time is past
+        ``until_ns`` (then it is not written)."""
         t = self.topics[topic]
         if topic == CLOCK_TOPIC:
             self.clock_ns = max(self.clock_ns, cdr_stamp_ns(data))
         ns = self.log_time(t, data)
+        if self.until_ns is not None and ns > self.until_ns:
+            return False
         if self.first_ns is None or ns < self.first_ns:
             self.first_ns = ns
         self.writer.write(t.connection, ns, bytes(data))
@@ -166,6 +170,7 @@ class BagRecorder:
             self.tf.odom(cdr_stamp_ns(data), bytes(data))
         elif topic == JOINT_STATES_TOPIC:
             self.tf.joints(cdr_stamp_ns(data), bytes(data))
+        return True
 
     def counts(self) -> dict[str, int]:
         return {name: t.count for name, t in self.topics.items()}
