@@ -129,8 +129,10 @@ def test_a_bare_node_reads_its_packaged_file(exe, graph, probe):
     name = NODE_NAMES[exe]
     log = graph.log_dir / f"{exe}.bare.log"
     with open(log, "wb") as out:
+        # cwd: the recorder's bag (out_dir '' = ./recording_<date>) goes to the test's directory
         proc = subprocess.Popen([sys.executable, "-m", f"cpg_walker.nodes.{exe}"], env=graph.env, stdout=out,
-                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
+                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True,
+                                cwd=graph.log_dir)
     try:
         expected = ros_parameters(f"{name}.yaml", name)
         got = _read_back(probe, name, list(expected))

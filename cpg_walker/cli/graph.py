@@ -32,6 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(NODE: sim, pid, cpg, player; VALUE parsed as YAML); repeatable")
     p.add_argument("--log-dir", default=None, metavar="DIR",
                    help="where the node logs are written (default: a new temporary directory)")
+    p.add_argument("--record", default=None, metavar="DIR",
+                   help="record every topic (+ /tf, /tf_static) to DIR/recording.mcap, a rosbag2 MCAP, "
+                        "complete once the graph has stopped (cpg-walker plot reads it)")
     p.set_defaults(func=_run)
 
 
@@ -56,5 +59,6 @@ def _run(args: argparse.Namespace) -> int:
 
     spec = GraphSpec(pacing=args.pacing, duration=args.duration, zeta=args.zeta, alpha=args.alpha,
                      player=args.player, domain_id=args.domain_id,
-                     params=[parse_param(t) for t in args.params], log_dir=args.log_dir)
+                     params=[parse_param(t) for t in args.params], log_dir=args.log_dir,
+                     record=args.record)
     return run_foreground(spec)

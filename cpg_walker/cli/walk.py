@@ -1,7 +1,8 @@
 """`cpg-walker walk --duration S --zeta Z --alpha A --feedback on|off [--schedule "T,Z,A;T,Z,A"] --out DIR`:
 the learned CPG walking the simulated HOAP-2 through the ROS graph (sim_node + pid_node + cpg_node);
-writes DIR/walk.json. The schedule's changes go through cpg_node's SetParameters service at those sim
-times (experiments/walk_graph.py)."""
+writes DIR/walk.json, and with --record DIR/recording.mcap (every topic; `cpg-walker plot` reads it).
+The schedule's changes go through cpg_node's SetParameters service at those sim times
+(experiments/walk_graph.py)."""
 
 from __future__ import annotations
 
@@ -31,6 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "learns it)")
     p.add_argument("--pacing", choices=PACINGS, default="lockstep",
                    help="the sim node's pacing (default lockstep: deterministic)")
+    p.add_argument("--record", action="store_true",
+                   help="also record every topic (+ /tf, /tf_static) to DIR/recording.mcap, a rosbag2 MCAP "
+                        "(Foxglove, PlotJuggler, ros2 bag play; cpg-walker plot)")
     p.set_defaults(func=_run)
 
 
@@ -42,11 +46,13 @@ def _run(args: argparse.Namespace) -> int:
     schedule = parse_schedule(args.schedule) if args.schedule else None  # ValueError: a user error
     feedback = None if args.feedback is None else args.feedback == "on"
     report = run_graph_walk(args.out, duration=args.duration, zeta=args.zeta, alpha=args.alpha,
-                            cpg_file=args.cpg_file, feedback=feedback, schedule=schedule, pacing=args.pacing)
+                            cpg_file=args.cpg_file, feedback=feedback, schedule=schedule, pacing=args.pacing,
+                            record=args.record)
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps",
             "lateral_drift_m", "heading_change_deg", "zeta", "alpha", "feedback", "real_time_factor")
     print(json.dumps({k: report[k] for k in keys}))
     fall = f"fell at {report['fall_time_s']} s" if report["fell"] else "no fall"
     print(f"walked {report['distance_m']:.3f} m in {report['duration_s']:.1f} s "
-          f"({report['mean_speed_mps']:.3f} m/s), {fall}; walk.json in {args.out}")
+          f"({report['mean_speed_mps']:.3f} m/s), {fall}; walk.json in {args.out}"
+          + (f"; recording: {report['bag']}" if args.record else ""))
     return 0

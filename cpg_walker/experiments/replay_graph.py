@@ -98,6 +98,7 @@ def run_graph(
     tag: str = "graph",
     node_params: dict[str, dict] | None = None,
     attach: Callable[[Graph], list[subprocess.Popen]] | None = None,
+    bag_dir: str | Path | None = None,
 ) -> GraphRun:
     """Run sim_node + pid_node (+ ``target`` node with ``target_params``) for ``duration`` sim seconds.
     Each node gets its parameters file (config/<node>.yaml), then these arguments as overrides
@@ -108,7 +109,8 @@ def run_graph(
     (``pid_params`` override). ``node_params``: more overrides by node executable (e.g. the scheduling
     parameters); ``attach(graph)``, called once the nodes are started, may start more processes on the
     graph's domain (subscribers, a CPU load) and returns them: they are stopped when the sim has finished.
-    Raises RuntimeError (with the sim's log tail) if the sim fails."""
+    ``bag_dir``: record every topic to ``bag_dir/recording.mcap`` (recorder_node, started first and
+    stopped last). Raises RuntimeError (with the sim's log tail) if the sim fails."""
     from cpg_walker.robot.run_record import RunRecord
 
     if pacing not in PACINGS:
@@ -120,6 +122,8 @@ def run_graph(
     started = time.monotonic()
     more = node_params or {}
     with Graph(work / f"{tag}_logs") as g:
+        if bag_dir is not None:
+            start_recorder(g, bag_dir, timeout)
         g.start("pid_node", **{"lockstep": pacing == "lockstep", "wait_for_targets": target is not None,
                                **(pid_params or {}), **more.get("pid_node", {})})
         if target is not None:
@@ -143,6 +147,15 @@ def run_graph(
     record = RunRecord.load(record_path)
     return GraphRun(record=record, target=target, pacing=pacing,
                     control_period=float(record.stats["control_period_s"]), wall_s=wall, cpu_s=cpu, logs=logs)
+
+
+def start_recorder(g: Graph, bag_dir: str | Path, timeout: float) -> None:
+    """recorder_node on the graph, writing to ``bag_dir``; returns once it is listening (its topic scans
+    then catch each node's publishers as they appear)."""
+    from cpg_walker.nodes.recorder_node import READY
+
+    g.start("recorder_node", out_dir=str(Path(bag_dir).resolve()))
+    g.wait_for_log("recorder_node", READY, timeout)
 
 
 def stop_process(proc: subprocess.Popen, timeout: float = 5.0) -> None:

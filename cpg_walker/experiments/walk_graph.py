@@ -24,6 +24,7 @@ import threading
 import time
 from pathlib import Path
 
+from cpg_walker.nodes.recording import BAG_NAME
 from cpg_walker.walker.learning import cpg_defaults
 
 #: Wall s to allow cpg_node for learning at start-up (cpg_file ''): pid_node's startup_wait then.
@@ -159,8 +160,10 @@ def run_graph_walk(
     control_period: float | None = None,
     stop_on_fall: bool = True,
     timeout: float | None = None,
+    record: bool = False,
 ) -> dict:
-    """Walk through sim_node + pid_node + cpg_node; write ``walk.json``; return its content. ``zeta``,
+    """Walk through sim_node + pid_node + cpg_node; write ``walk.json``; return its content. ``record``:
+    every topic also to ``out_dir/recording.mcap`` (recorder_node; walk.json's ``bag``). ``zeta``,
     ``alpha``, ``feedback``, ``cpg_file`` None: cpg_node's own (config/cpg.yaml), not passed on.
     ``schedule``: (t, zeta, alpha) changes sent through cpg_node's SetParameters service (module doc)."""
     from cpg_walker.experiments.replay_graph import run_graph
@@ -205,7 +208,8 @@ def run_graph_walk(
         cpg_params = {"cpg_file": cpg_file, "lockstep": pacing == "lockstep", **overrides}
         run = run_graph(out, "cpg_node", cpg_params, duration=duration, pacing=pacing,
                         control_period=control_period, stop_on_fall=stop_on_fall, timeout=limit,
-                        pid_params={"startup_wait": LEARN_WAIT_S} if learn_now else None, attach=attach)
+                        pid_params={"startup_wait": LEARN_WAIT_S} if learn_now else None, attach=attach,
+                        bag_dir=out if record else None)
     finally:
         for c in changes:
             c.stop()
@@ -220,6 +224,8 @@ def run_graph_walk(
     cpg_stats = re.findall(r"stats (\{.*\})", run.logs.get("cpg_node", ""))
     if cpg_stats:
         report["cpg_feedback"] = json.loads(cpg_stats[-1]).get("feedback")
+    if record:
+        report["bag"] = str((out / f"{BAG_NAME}.mcap").resolve())
     if schedule:
         report["schedule"] = landed(changes[0].sent, run.logs.get("cpg_node", ""))
         report["schedule_unsent"] = [list(x) for x in changes[0].todo]

@@ -24,6 +24,9 @@ from pathlib import Path
 from cpg_walker.nodes.runtime import NODE_NAMES, params_file
 
 NODES = tuple(NODE_NAMES)
+#: Nodes stopped after all the others, with their own wall-s timeout: the recorder keeps listening until
+#: the rest have gone quiet, then completes its bag (computing /tf takes a while on a long run).
+STOP_LAST = {"recorder_node": 600.0}
 
 
 def random_domain_id() -> int:
@@ -178,12 +181,32 @@ class Graph:
             _signal_group(p.pid, signal.SIGKILL)  # stray children of an exited leader, if any
         return p.returncode
 
+    def wait_for_log(self, node: str, text: str, timeout: float) -> None:
+        """Wait until ``node``'s log holds ``text``; RuntimeError if it exits first, TimeoutError (with its
+        log tail) after ``timeout`` wall s."""
+        proc = self.procs[node]
+        end = time.monotonic() + timeout
+        while text not in proc.log():
+            if proc.popen.poll() is not None:
+                raise RuntimeError(f"{node} exited with status {proc.popen.returncode}; log tail:\n"
+                                   f"{proc.log()[-2000:]}")
+            if time.monotonic() > end:
+                raise TimeoutError(f"{node} did not log {text!r} within {timeout} s; log tail:\n"
+                                   f"{proc.log()[-2000:]}")
+            time.sleep(0.05)
+
     def stop_all(self, timeout: float = 5.0) -> dict[str, int | None]:
-        """Stop every node (all get SIGINT first, then each is waited for)."""
-        for proc in self.procs.values():
-            if proc.popen.poll() is None:
+        """Stop every node (all get SIGINT first, then each is waited for); the STOP_LAST nodes once the
+        others have stopped, each with its own timeout."""
+        last = [name for name in self.procs if name in STOP_LAST]
+        for name, proc in self.procs.items():
+            if name not in last and proc.popen.poll() is None:
                 _signal_group(proc.pid, signal.SIGINT)
-        return {name: self.stop(name, timeout, interrupt=False) for name in list(self.procs)}
+        codes = {name: self.stop(name, timeout, interrupt=False) for name in list(self.procs)
+                 if name not in last}
+        for name in last:
+            codes[name] = self.stop(name, STOP_LAST[name])
+        return codes
 
     def __enter__(self) -> Graph:
         return self

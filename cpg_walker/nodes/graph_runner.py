@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
-PREFIX = {"sim_node": "sim", "pid_node": "pid", "cpg_node": "cpg", "target_player_node": "player"}
+PREFIX = {"sim_node": "sim", "pid_node": "pid", "cpg_node": "cpg", "target_player_node": "player",
+          "recorder_node": "rec"}
 
 
 @dataclass
@@ -29,6 +30,7 @@ class GraphSpec:
     domain_id: int | None = None
     params: list[tuple[str, str, object]] = field(default_factory=list)
     log_dir: str | None = None
+    record: str | None = None  # a directory: recorder_node writes recording.mcap there
 
     def sim_value(self, name: str) -> object:
         """The sim's ``pacing`` / ``duration``: as given, else its parameters file's."""
@@ -91,6 +93,10 @@ def resolve_domain(domain_id: int | None) -> tuple[int, str]:
     return chosen, how
 
 
+#: Wall s for the recorder to start listening before the graph starts without it being an error.
+RECORDER_START_S = 120.0
+
+
 class LogTail:
     """Follows the nodes' log files and prints their new complete lines, prefixed with the node."""
 
@@ -131,7 +137,11 @@ def banner(domain: int, how: str, spec: GraphSpec, log_dir: Path) -> str:
     until = f"{duration:g} sim s" if duration else "until Ctrl-C"
     lines = [f"ROS_DOMAIN_ID={domain} ({how}); sim_node + pid_node + {target}, {spec.sim_value('pacing')} "
              f"pacing, {until}",
-             f"node logs: {log_dir}",
+             f"node logs: {log_dir}"]
+    if spec.record:
+        lines.append(f"recording every topic to {Path(spec.record).resolve()}/recording.mcap (complete once "
+                     "the graph has stopped)")
+    lines += [
              "from another shell:"]
     if not spec.player:
         lines.append(f"  ROS_DOMAIN_ID={domain} cpg-walker param set /cpg zeta 0.8")
@@ -156,6 +166,11 @@ def run_foreground(spec: GraphSpec, out: TextIO = sys.stdout) -> int:
     with Graph(log_dir, domain_id=domain) as g:
         try:
             print(banner(domain, how, spec, log_dir), file=out, flush=True)
+            if spec.record:
+                from cpg_walker.nodes.recorder_node import READY
+
+                g.start("recorder_node", out_dir=str(Path(spec.record).resolve()))
+                g.wait_for_log("recorder_node", READY, RECORDER_START_S)
             for node, p in params.items():
                 g.start(node, **p)
             logs = {name: proc.log_path for name, proc in g.procs.items()}

@@ -18,7 +18,8 @@ if TYPE_CHECKING:  # rclpy itself is imported where it is used: the CLI imports 
 #: sim_node's pacings: wall-clock schedule, as fast as possible, or one period per controller answer.
 PACINGS = ("realtime", "fast", "lockstep")
 #: Each node executable's ROS node name; its parameters are config/<node name>.yaml (``params_file``).
-NODE_NAMES = {"sim_node": "sim", "pid_node": "pid", "target_player_node": "target_player", "cpg_node": "cpg"}
+NODE_NAMES = {"sim_node": "sim", "pid_node": "pid", "target_player_node": "target_player", "cpg_node": "cpg",
+              "recorder_node": "recorder"}
 
 
 def parse_cli(prog: str, description: str, interface: str, argv: list[str] | None = None) -> list[str]:

@@ -47,6 +47,13 @@ def _relative(p_pos: np.ndarray, p_mat: np.ndarray, c_pos: np.ndarray, c_mat: np
     return p_mat.T @ (c_pos - p_pos), q
 
 
+def fixed_links(model: mujoco.MjModel) -> frozenset[str]:
+    """Links welded to their parent link (a body without a joint, other than the floating base): their
+    transform in the parent never changes (``/tf_static``; the others are ``/tf``)."""
+    return frozenset(link_name(model.body(b).name) for b in range(1, model.nbody)
+                     if int(model.body_parentid[b]) != 0 and int(model.body_jntnum[b]) == 0)
+
+
 def body_transforms(model: mujoco.MjModel, data: mujoco.MjData) -> list[Transform]:
     """Every link's pose in its parent link, from the posed ``data`` (after ``mj_kinematics``)."""
     out = []
