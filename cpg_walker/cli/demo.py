@@ -1,57 +1,56 @@
-"""`cpg-walker demo --out DIR`: the project's main job, end to end (what `make demo` runs).
-
-1. The paper's Section II experiment with the generic CPG (figures + section2.json) in DIR/section2.
-2. The simulated HOAP-2 walking Fujitsu's recorded gait for 30 s under PID control, rendered offscreen
-   to a side-view filmstrip and GIF, in DIR/replay.
-3. The humanoid CPG (paper Sec. III-A) learned from that walk: Fig. 6 and the learned YAML, in DIR/learn.
-4. The robot walking 60 s from the learned CPG (in-process; zeta = alpha = 1), filmstrip in DIR/cpg_walk.
-"""
+"""`cpg-walker demo --duration S --out DIR`: the project's main job through the ROS graph (what `make demo`
+runs). The learned CPG walks the simulated HOAP-2 through sim_node + pid_node + cpg_node (three
+processes), zeta and alpha change mid-run through cpg_node's parameter service (faster, shorter steps,
+in place, backwards), a one-line status follows the run, and every topic is recorded; then DIR holds the
+recording (recording.mcap), its plots (*.png), a video (walk.mp4), walk.json and summary.json
+(experiments/demo.py). Ctrl-C stops every node and still writes what was recorded (exit status 130).
+--paper adds the in-process Section II experiment and the CPG learning (Fig. 6) first."""
 
 from __future__ import annotations
 
 import argparse
 
+from cpg_walker.nodes.runtime import PACINGS
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="the main job end to end (what `make demo` runs)")
+    p = sub.add_parser("demo", help="the main job: a walk through the ROS graph with zeta/alpha changes, "
+                                    "recorded, plotted and filmed (what `make demo` runs)")
     p.add_argument("--out", default="results", help="output directory (default: results)")
+    p.add_argument("--duration", type=float, default=60.0, metavar="S",
+                   help="sim seconds of the walk (default 60); the zeta/alpha changes are spread over it")
+    p.add_argument("--pacing", choices=PACINGS, default="lockstep",
+                   help="the sim node's pacing (default lockstep: deterministic, safe on a loaded machine; "
+                        "realtime: at wall-clock speed, to watch)")
+    p.add_argument("--domain-id", type=int, default=None, metavar="N",
+                   help="DDS domain (default: ROS_DOMAIN_ID if set, else a free one in 1..101)")
+    p.add_argument("--paper", action="store_true",
+                   help="also run the paper's Section II experiment and the CPG learning (Fig. 6) first, "
+                        "in-process, into DIR/section2 and DIR/learn")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
-    import json
     import os
     import sys
-    from pathlib import Path
 
     os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede the mujoco import
 
-    from cpg_walker.cli.section2 import run_section2
-    from cpg_walker.experiments.cpg_walk import run_cpg_walk
-    from cpg_walker.experiments.learn import run_learn
-    from cpg_walker.experiments.replay import replay_recording
+    from cpg_walker.experiments.demo import run_demo
+    from cpg_walker.nodes.graph_runner import resolve_domain
 
-    out = Path(args.out)
-    print("== 1/4  Section II: the generic CPG learns and replays a periodic signal", file=sys.stderr)
-    status = run_section2(out / "section2")
-    if status:
-        return status
-    print("== 2/4  the simulated HOAP-2 walks Fujitsu's recorded gait (30 s, PID, in-process)",
-          file=sys.stderr)
-    report = replay_recording(str(out / "replay"), gait="walk")
-    keys = ("fell", "duration_s", "distance_m", "mean_speed_mps", "steps", "lateral_drift_m",
-            "heading_change_deg")
-    print(json.dumps({"replay": {k: report[k] for k in keys}}))
-    print("== 3/4  learning the 10-DOF humanoid CPG from the recorded walk (Fig. 6)", file=sys.stderr)
-    learned = run_learn(str(out / "learn"))
-    print(json.dumps({"learn": {k: learned[k] for k in ("gait_frequency_hz", "recorded_gait_frequency_hz",
-                                                         "max_rms_error_deg", "n_oscillators")}}))
-    print("== 4/4  the simulated HOAP-2 walks 60 s from the learned CPG (zeta = 1, alpha = 1)",
-          file=sys.stderr)
-    walked = run_cpg_walk(str(out / "cpg_walk"), duration=60.0,
-                          cpg_file=str(out / "learn" / "cpg_humanoid.yaml"))
-    print(json.dumps({"cpg_walk": {k: walked[k] for k in keys}}))
-    print(f"demo: figures and JSON under {out}/ (section2/*.png, replay/filmstrip.png, replay/replay.gif, "
-          "learn/fig6.png, cpg_walk/filmstrip.png)",
-          file=sys.stderr)
-    return 0
+    if not (args.duration > 0):
+        raise ValueError(f"--duration must be a positive number of sim seconds, got {args.duration}")
+    domain, how = resolve_domain(args.domain_id)
+    print(f"ROS_DOMAIN_ID={domain} ({how})", file=sys.stderr)
+    summary = run_demo(args.out, args.duration, pacing=args.pacing, domain_id=domain, paper=args.paper)
+    fall = f"fell at {summary['fall_time_s']} s" if summary["fell"] else "no fall"
+    print("segment (from sim s: zeta, alpha -> forward speed over its second half):", file=sys.stderr)
+    for seg in summary["segments"]:
+        speed = "-" if seg["speed_mps"] is None else f"{seg['speed_mps']:+.3f} m/s"
+        print(f"  {seg['from_s']:6.1f} s: zeta {seg['zeta']:+g}, alpha {seg['alpha']:g} -> {speed}  "
+              f"{seg['label']}", file=sys.stderr)
+    print(f"{summary['duration_s']:.1f} sim s, {summary['distance_m']:+.2f} m along the starting heading, "
+          f"heading change {summary['heading_change_deg']:+.0f} deg, {fall}; in {args.out}/: "
+          + ", ".join(summary["files"]), file=sys.stderr)
+    return 130 if summary["interrupted"] else 0

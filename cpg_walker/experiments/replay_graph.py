@@ -99,6 +99,7 @@ def run_graph(
     node_params: dict[str, dict] | None = None,
     attach: Callable[[Graph], list[subprocess.Popen]] | None = None,
     bag_dir: str | Path | None = None,
+    domain_id: int | None = None,
 ) -> GraphRun:
     """Run sim_node + pid_node (+ ``target`` node with ``target_params``) for ``duration`` sim seconds.
     Each node gets its parameters file (config/<node>.yaml), then these arguments as overrides
@@ -110,7 +111,8 @@ def run_graph(
     parameters); ``attach(graph)``, called once the nodes are started, may start more processes on the
     graph's domain (subscribers, a CPU load) and returns them: they are stopped when the sim has finished.
     ``bag_dir``: record every topic to ``bag_dir/recording.mcap`` (recorder_node, started first and
-    stopped last). Raises RuntimeError (with the sim's log tail) if the sim fails."""
+    stopped last). ``domain_id``: the graph's DDS domain (None: a free one). Raises RuntimeError (with the
+    sim's log tail) if the sim fails."""
     from cpg_walker.robot.run_record import RunRecord
 
     if pacing not in PACINGS:
@@ -121,7 +123,7 @@ def run_graph(
     record_path.unlink(missing_ok=True)
     started = time.monotonic()
     more = node_params or {}
-    with Graph(work / f"{tag}_logs") as g:
+    with Graph(work / f"{tag}_logs", domain_id=domain_id) as g:
         if bag_dir is not None:
             start_recorder(g, bag_dir, timeout)
         g.start("pid_node", **{"lockstep": pacing == "lockstep", "wait_for_targets": target is not None,

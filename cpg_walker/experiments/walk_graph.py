@@ -22,10 +22,21 @@ import math
 import re
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Protocol
 
 from cpg_walker.nodes.recording import BAG_NAME
 from cpg_walker.walker.learning import cpg_defaults
+
+
+class Watcher(Protocol):
+    """Something that follows a running graph from this process (``run_graph_walk``'s ``watchers``)."""
+
+    def start(self, domain_id: int) -> None: ...
+
+    def stop(self) -> None: ...
+
 
 #: Wall s to allow cpg_node for learning at start-up (cpg_file ''): pid_node's startup_wait then.
 LEARN_WAIT_S = 600.0
@@ -161,11 +172,15 @@ def run_graph_walk(
     stop_on_fall: bool = True,
     timeout: float | None = None,
     record: bool = False,
+    domain_id: int | None = None,
+    watchers: Sequence[Watcher] = (),
 ) -> dict:
     """Walk through sim_node + pid_node + cpg_node; write ``walk.json``; return its content. ``record``:
     every topic also to ``out_dir/recording.mcap`` (recorder_node; walk.json's ``bag``). ``zeta``,
     ``alpha``, ``feedback``, ``cpg_file`` None: cpg_node's own (config/cpg.yaml), not passed on.
-    ``schedule``: (t, zeta, alpha) changes sent through cpg_node's SetParameters service (module doc)."""
+    ``schedule``: (t, zeta, alpha) changes sent through cpg_node's SetParameters service (module doc).
+    ``domain_id``: the graph's DDS domain (None: a free one). ``watchers`` are started on the graph's domain
+    once its nodes are (e.g. a live status) and stopped when it has finished, however it ends."""
     from cpg_walker.experiments.replay_graph import run_graph
     from cpg_walker.nodes.runtime import PACINGS
     from cpg_walker.walker.learning import load_controller
@@ -198,10 +213,15 @@ def run_graph_walk(
     limit = timeout if timeout is not None else 60.0 + duration * 5.0 + (LEARN_WAIT_S if learn_now else 0.0)
     changes: list[ParameterSchedule] = []
 
+    started: list[Watcher] = []
+
     def attach(graph) -> list:
         if schedule:
             changes.append(ParameterSchedule(graph.domain_id, schedule))
             changes[0].start()
+        for w in watchers:
+            w.start(graph.domain_id)
+            started.append(w)
         return []
 
     try:
@@ -209,9 +229,9 @@ def run_graph_walk(
         run = run_graph(out, "cpg_node", cpg_params, duration=duration, pacing=pacing,
                         control_period=control_period, stop_on_fall=stop_on_fall, timeout=limit,
                         pid_params={"startup_wait": LEARN_WAIT_S} if learn_now else None, attach=attach,
-                        bag_dir=out if record else None)
+                        bag_dir=out if record else None, domain_id=domain_id)
     finally:
-        for c in changes:
+        for c in [*changes, *started]:
             c.stop()
     period = ctrl.period / abs(zeta) if ctrl is not None and zeta else None
     metrics, _ = run.report(period_s=period)

@@ -271,17 +271,13 @@ def tf_messages(pairs: list[tuple[int, bytes, bytes]], store: Any) -> tuple[byte
     static = [t for t in frames.body_transforms(model, data) if t.child in fixed] \
         + frames.site_transforms(model, data)
     static_msg = _tf_message(store, static, 0)
-    qadr: dict[str, int] = {model.joint(j).name: int(model.jnt_qposadr[j]) for j in range(model.njnt)
-                            if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE}
     out = []
     for ns, odom_raw, js_raw in pairs:
         odom = deserialize(store, odom_raw, "nav_msgs/msg/Odometry")
         js = deserialize(store, js_raw, "sensor_msgs/msg/JointState")
         p, o = odom.pose.pose.position, odom.pose.pose.orientation
-        data.qpos[0:7] = (p.x, p.y, p.z, o.w, o.x, o.y, o.z)
-        for name, q in zip(js.name, js.position, strict=False):
-            if name in qadr:
-                data.qpos[qadr[name]] = q
+        frames.set_pose(model, data, (p.x, p.y, p.z), (o.w, o.x, o.y, o.z),
+                        zip(js.name, js.position, strict=False))
         mujoco.mj_kinematics(model, data)
         base = frames.odom_transform(model, data)
         base = frames.Transform(odom.header.frame_id or base.parent, base.child, base.translation,

@@ -8,6 +8,7 @@ MuJoCo body name; ``imu`` is a fixed frame at the model's ``imu`` site. The URDF
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -89,3 +90,19 @@ def odom_transform(model: mujoco.MjModel, data: mujoco.MjData) -> Transform:
     a = int(model.jnt_qposadr[j])
     return Transform(ODOM_FRAME, link_name(model.body(b).name), data.qpos[a:a + 3].copy(),
                      data.qpos[a + 3:a + 7].copy())
+
+
+def set_pose(model: mujoco.MjModel, data: mujoco.MjData, position: Sequence[float],
+             quat_wxyz: Sequence[float], joints: Iterable[tuple[str, float]]) -> None:
+    """Pose ``data.qpos`` as the sim was: the floating base (``odom -> base_link``, e.g. from
+    /odom/ground_truth) at ``position``/``quat_wxyz``, each named hinge joint (e.g. /joint_states' names and
+    positions) at its angle; names the model does not have are skipped. Run ``mj_kinematics`` (transforms)
+    or ``mj_forward`` (also cameras) after."""
+    b = next(i for i in range(1, model.nbody) if int(model.body_parentid[i]) == 0)
+    a = int(model.jnt_qposadr[int(model.body_jntadr[b])])
+    data.qpos[a:a + 3] = position
+    data.qpos[a + 3:a + 7] = quat_wxyz
+    for name, q in joints:
+        j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if j >= 0 and model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
+            data.qpos[int(model.jnt_qposadr[j])] = q

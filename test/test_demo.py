@@ -1,0 +1,165 @@
+"""`cpg-walker demo`: its schedule and summary (in-process), and the real command end to end - a short run
+writes the recording, the plots, the video and summary.json, exits 0 and leaves no process behind; SIGINT
+mid-run stops every node and still writes what was recorded (multi-process, marker ``ros``)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import pytest
+from ros_helpers import START_S, node_pids, sim_deadline
+
+from cpg_walker.experiments.demo import (
+    DEMO_SCHEDULE,
+    MIN_WALK_S,
+    GraphStatus,
+    demo_schedule,
+    segments,
+    walk_start_s,
+)
+
+NS = SimpleNamespace  # a message's fields
+#: Sim s of the end-to-end run: the recorded opening steps (~6.6 s), then every change of the schedule.
+SHORT_S = 12.0
+#: Post-processing (reading the bag, plots, ~150 video frames rendered on the CPU), a hang guard (wall s).
+AFTER_S = 900.0
+
+
+def test_schedule_is_spread_over_the_walking_part_and_reverses_safely():
+    start = walk_start_s()
+    assert 5.0 < start < 8.0  # the recorded opening steps, then the hand-over to the CPG
+    for duration in (start + MIN_WALK_S, SHORT_S, 60.0):
+        sched = demo_schedule(duration, start)
+        times = [t for t, _, _ in sched]
+        assert times == sorted(times) and start < times[0] and times[-1] < duration
+        assert [(z, a) for _, z, a in sched] == [(z, a) for _, z, a, _ in DEMO_SCHEDULE]
+    zetas = [1.0] + [z for _, z, _, _ in DEMO_SCHEDULE]
+    first_back = next(i for i, z in enumerate(zetas) if z < 0)
+    assert first_back > 1 and max(zetas[:first_back]) > 1.0  # walks forward (faster too) before reversing
+    assert zetas[first_back - 1] == 1.0  # through zeta 1 first: 1.5 -> -1 was measured to fall
+    with pytest.raises(ValueError, match="too short"):
+        demo_schedule(start + MIN_WALK_S - 0.1, start)
+
+
+def test_segments_start_when_cpg_node_applied_the_change():
+    sent = [{"t_s": 8.0, "zeta": 1.4, "alpha": 1.0, "accepted": True, "applied_after_sim_s": 8.3},
+            {"t_s": 9.0, "zeta": 1.0, "alpha": 0.5, "accepted": False},
+            {"t_s": 10.0, "zeta": 1.0, "alpha": 0.0, "accepted": True}]
+    segs = segments(sent, 12.0)
+    assert [(s["from_s"], s["to_s"], s["zeta"], s["alpha"]) for s in segs] == [
+        (0.0, 8.3, 1.0, 1.0), (8.3, 10.0, 1.4, 1.0), (10.0, 12.0, 1.0, 0.0)]
+    assert segs[1]["label"] and segs[2]["label"]
+    assert [s["from_s"] for s in segments([(5.0, 1.4, 1.0), (20.0, 1.0, 0.5)], 12.0)] == [0.0, 5.0]
+
+
+def test_status_line_from_messages():
+    status = GraphStatus(lambda line, t: None)
+    assert "sim    0.0 s" in status.line() and "speed - m/s" in status.line()
+    stamp = lambda t: NS(sec=int(t), nanosec=round((t % 1) * 1e9))  # noqa: E731
+    quarter = NS(w=0.9238795325112867, x=0.0, y=0.0, z=0.3826834323650898)  # yaw 45 deg
+    for t in (1.0, 2.0):
+        status._on_clock(NS(clock=stamp(t)))
+        status._on_odom(NS(header=NS(stamp=stamp(t)), pose=NS(pose=NS(
+            position=NS(x=0.1 * t, y=0.1 * t, z=0.3), orientation=quarter))))
+    status._on_diagnostics(NS(status=[NS(name="cpg_walker/cpg", values=[
+        NS(key="zeta", value="1.4"), NS(key="alpha", value="0.5"), NS(key="state", value="walking")])]))
+    status.fallen = True
+    line = status.line()
+    assert "sim    2.0 s" in line and "speed +0.141 m/s" in line and "heading +45 deg" in line
+    assert "zeta +1.40 alpha 0.50" in line and "cpg walking" in line and "FALLEN" in line
+
+
+# ------------------------------------------------------------------------------------- end to end
+
+def _demo(out, ros_domain, duration: float) -> subprocess.Popen:
+    from cpg_walker.nodes.graph import isolated_env
+
+    return subprocess.Popen(
+        [sys.executable, "-m", "cpg_walker.cli.main", "demo", "--duration", str(duration), "--out", str(out)],
+        env=isolated_env(ros_domain), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        stdin=subprocess.DEVNULL, start_new_session=True)
+
+
+def _finish(p: subprocess.Popen, timeout: float) -> str:
+    try:
+        out, _ = p.communicate(timeout=timeout)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    return out
+
+
+def _check_outputs(out, summary: dict) -> None:
+    from cpg_walker.nodes.recording import read_topics
+
+    files = summary["files"]
+    assert "recording.mcap" in files and "walk.mp4" in files and "summary.json" in files
+    assert {"targets_vs_states.png", "modulation.png"} <= set(files)
+    for name in files:
+        assert (out / name).stat().st_size > 0, name
+    topics = read_topics(out / "recording.mcap", ["/joint_states", "/imu", "/tf", "/robot_description",
+                                                  "/joint_targets", "/odom/ground_truth"])
+    sim_s = summary["duration_s"]
+    assert len(topics["/robot_description"]) == 1
+    assert len(topics["/odom/ground_truth"]) >= 0.9 * sim_s / 0.01  # odom_period 0.01 sim s
+    for name in ("/joint_states", "/imu", "/joint_targets"):  # every 0.002 sim s control period
+        assert len(topics[name]) >= 0.9 * sim_s / 0.002, name
+    assert len(topics["/tf"]) >= 0.9 * len(topics["/odom/ground_truth"])
+    import imageio.v2 as imageio
+
+    with imageio.get_reader(out / "walk.mp4") as video:
+        assert video.count_frames() >= 0.9 * sim_s * 12.5  # sim speed, 12.5 frames per sim s
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_short_demo_writes_everything_and_leaves_nothing(tmp_path, ros_domain):
+    out = tmp_path / "demo"
+    p = _demo(out, ros_domain, SHORT_S)
+    log = _finish(p, sim_deadline(SHORT_S) + AFTER_S)
+    left = node_pids(ros_domain)
+    assert p.returncode == 0, log[-3000:]
+    assert not left and subprocess.run(["pgrep", "-g", str(p.pid)], capture_output=True).returncode == 1
+    assert "\x1b" not in log and "\r" not in log  # not a terminal: plain status lines
+    assert "sim " in log and "| RTF " in log and "zeta " in log
+    summary = json.loads((out / "summary.json").read_text())
+    _check_outputs(out, summary)
+    assert summary["interrupted"] is False and summary["duration_s"] == pytest.approx(SHORT_S, abs=0.05)
+    segs = summary["segments"]
+    assert [(s["zeta"], s["alpha"]) for s in segs] == [(1.0, 1.0)] + [(z, a) for _, z, a, _ in DEMO_SCHEDULE]
+    walk = json.loads((out / "walk.json").read_text())
+    assert [s["applied_after_sim_s"] for s in walk["schedule"]] == [s["from_s"] for s in segs[1:]]
+    assert segs[0]["speed_mps"] > 0.02  # walks forward first
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_sigint_stops_every_node_and_still_writes_the_outputs(tmp_path, ros_domain):
+    from ros_helpers import Probe
+    from rosgraph_msgs.msg import Clock
+
+    out = tmp_path / "demo"
+    p = _demo(out, ros_domain, 40.0)
+    probe = Probe(ros_domain)
+    try:
+        probe.listen("/clock", Clock, 1)
+        sim_s = lambda: probe.received["/clock"][-1][1].clock.sec if probe.received["/clock"] else 0  # noqa: E731
+        probe.wait(lambda: sim_s() >= 3, "the demo's sim to reach 3 s", sim_deadline(3.0))
+    finally:
+        probe.close()
+    assert node_pids(ros_domain), "the demo's nodes should be running"
+    p.send_signal(signal.SIGINT)
+    log = _finish(p, AFTER_S + START_S)
+    left = node_pids(ros_domain)
+    assert p.returncode == 130, log[-3000:]
+    assert not left and subprocess.run(["pgrep", "-g", str(p.pid)], capture_output=True).returncode == 1
+    assert "SIGINT: stopping the graph" in log and "interrupted" in log
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and 3.0 <= summary["duration_s"] < 40.0
+    _check_outputs(out, summary)
