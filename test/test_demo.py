@@ -41,7 +41,9 @@ def test_schedule_is_spread_over_the_walking_part_and_reverses_safely():
     zetas = [1.0] + [z for _, z, _, _ in DEMO_SCHEDULE]
     first_back = next(i for i, z in enumerate(zetas) if z < 0)
     assert first_back > 1 and max(zetas[:first_back]) > 1.0  # walks forward (faster too) before reversing
-    assert zetas[first_back - 1] == 1.0  # through zeta 1 first: 1.5 -> -1 was measured to fall
+    alphas = [1.0] + [a for _, _, a, _ in DEMO_SCHEDULE]
+    # from forward walking at zeta = alpha = 1: 1.5 -> -1, and (1, 0) -> (-1, 1), were measured to fall
+    assert (zetas[first_back - 1], alphas[first_back - 1]) == (1.0, 1.0)
     with pytest.raises(ValueError, match="too short"):
         demo_schedule(start + MIN_WALK_S - 0.1, start)
 

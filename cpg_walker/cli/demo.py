@@ -42,8 +42,20 @@ def _run(args: argparse.Namespace) -> int:
     if not (args.duration > 0):
         raise ValueError(f"--duration must be a positive number of sim seconds, got {args.duration}")
     domain, how = resolve_domain(args.domain_id)
+    if args.paper:
+        from pathlib import Path
+
+        from cpg_walker.cli.section2 import run_section2
+        from cpg_walker.experiments.learn import run_learn
+
+        print("== Section II: the generic CPG learns and replays a periodic signal (in-process)",
+              file=sys.stderr)
+        run_section2(Path(args.out) / "section2")
+        print("== learning the 10-DOF humanoid CPG from the recorded walk (Fig. 6, in-process)",
+              file=sys.stderr)
+        run_learn(str(Path(args.out) / "learn"))
     print(f"ROS_DOMAIN_ID={domain} ({how})", file=sys.stderr)
-    summary = run_demo(args.out, args.duration, pacing=args.pacing, domain_id=domain, paper=args.paper)
+    summary = run_demo(args.out, args.duration, pacing=args.pacing, domain_id=domain)
     fall = f"fell at {summary['fall_time_s']} s" if summary["fell"] else "no fall"
     print("segment (from sim s: zeta, alpha -> forward speed over its second half):", file=sys.stderr)
     for seg in summary["segments"]:

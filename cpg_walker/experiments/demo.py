@@ -8,9 +8,9 @@ status (``GraphStatus``) follows the run from its topics; afterwards the recordi
 (experiments/plot_bag.py), a video (experiments/render.py) and ``summary.json`` (``summarize_recording``).
 
 The schedule's times are fractions of the walking part of the run (after the recorded opening steps and
-the hand-over to the CPG, ``walk_start_s``), so any ``--duration`` shows every change. The reversal goes
-through ζ = 1 at α = 0 (stepping in place), not straight from 1.4: measured with our feedback, 1.5 -> -1
-falls, 1.5 -> 1 -> -1 walks.
+the hand-over to the CPG, ``walk_start_s``), so any ``--duration`` shows every change. The reversal comes
+from forward walking at ζ = α = 1: measured with our feedback, 1.5 -> -1 falls, 1.5 -> 1 -> -1 walks, and
+reversing straight out of stepping in place (ζ 1, α 0 -> ζ -1, α 1) fell 3 s later in a 60 s demo.
 """
 
 from __future__ import annotations
@@ -29,10 +29,11 @@ from typing import Any
 
 #: (fraction of the walking time, zeta, alpha, what the robot does) - the run starts at zeta = alpha = 1.
 DEMO_SCHEDULE: tuple[tuple[float, float, float, str], ...] = (
-    (0.2, 1.4, 1.0, "faster (zeta 1.4)"),
-    (0.4, 1.0, 0.5, "shorter steps (alpha 0.5)"),
-    (0.55, 1.0, 0.0, "stepping in place (alpha 0)"),
-    (0.7, -1.0, 1.0, "backwards (zeta -1, alpha 1)"),
+    (0.15, 1.4, 1.0, "faster (zeta 1.4)"),
+    (0.3, 1.0, 0.5, "shorter steps (alpha 0.5)"),
+    (0.45, 1.0, 0.0, "stepping in place (alpha 0)"),
+    (0.6, 1.0, 1.0, "walking forward again (alpha 1)"),
+    (0.75, -1.0, 1.0, "backwards (zeta -1)"),
 )
 FIRST_SEGMENT = "walking forward (zeta 1, alpha 1)"
 #: Sim s of walking (after walk_start_s) the shortest demo needs: room for every change of the schedule.
@@ -299,10 +300,9 @@ def summarize_recording(bag: str | Path, schedule: list, walk_report: dict | Non
 # ------------------------------------------------------------------------------------------------ run
 
 def run_demo(out_dir: str | Path, duration: float, pacing: str = "lockstep", domain_id: int | None = None,
-             paper: bool = False, stream: Any = None) -> dict:
+             stream: Any = None) -> dict:
     """The demo into ``out_dir``: the graph walk with the schedule, live status and the recording, then
-    the plots, the video and summary.json (also after Ctrl-C: ``interrupted`` in the summary). ``paper``:
-    first the in-process Section II experiment and the learning (Fig. 6) into out_dir/section2, /learn."""
+    the plots, the video and summary.json (also after Ctrl-C: ``interrupted`` in the summary)."""
     from cpg_walker.experiments.walk_graph import run_graph_walk
     from cpg_walker.nodes.recording import BAG_NAME
 
@@ -311,14 +311,6 @@ def run_demo(out_dir: str | Path, duration: float, pacing: str = "lockstep", dom
     out.mkdir(parents=True, exist_ok=True)
     schedule = demo_schedule(duration, walk_start_s())
     say = lambda text: print(text, file=stream, flush=True)  # noqa: E731
-    if paper:
-        from cpg_walker.cli.section2 import run_section2
-        from cpg_walker.experiments.learn import run_learn
-
-        say("== Section II: the generic CPG learns and replays a periodic signal (in-process)")
-        run_section2(out / "section2")
-        say("== learning the 10-DOF humanoid CPG from the recorded walk (Fig. 6, in-process)")
-        run_learn(str(out / "learn"))
     say(f"== the HOAP-2 walks {duration:g} sim s through the ROS graph (sim, pid, cpg; {pacing} pacing), "
         "every topic recorded; zeta/alpha changes at sim s: "
         + ", ".join(f"{t:g} -> ({z:g}, {a:g})" for t, z, a in schedule))
