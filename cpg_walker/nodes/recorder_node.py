@@ -130,12 +130,27 @@ class RecorderNode(Node):
         return until is not None and (self.bag.clock_ns if self.bag.sim_time else time.time_ns()) >= until
 
     def on_exit(self) -> None:
+        _normal_scheduling()  # completing the bag (the /tf computation) needs no priority
         t0 = time.monotonic()
         path = self.bag.close()
         exit_log(self, f"wrote {path}: " + json.dumps(self.bag.counts(), sort_keys=True))
         exit_log(self, "stats " + json.dumps({"close_s": round(time.monotonic() - t0, 3),
                                               "longest_gap_ms": round(self.longest_gap_s * 1e3, 3),
                                               "gc": gc_summary(self)}))
+
+
+def _normal_scheduling() -> None:
+    """Back to normal scheduling (SCHED_OTHER) for every thread of this process, where it was raised."""
+    import os
+
+    from cpg_walker.nodes.runtime import _thread_ids
+
+    for tid, _ in _thread_ids():
+        try:
+            if os.sched_getscheduler(tid) != os.SCHED_OTHER:
+                os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+        except (OSError, AttributeError):
+            pass
 
 
 def spin_recorder(node: RecorderNode, stopping: list[bool]) -> None:
