@@ -190,7 +190,11 @@ def test_the_zeta_change_is_in_the_parameter_events(walk):
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_the_plain_mcap_reader_reads_the_file(walk):
+def test_the_plain_mcap_reader_reads_the_file(walk, tmp_path):
+    """The .mcap alone (no metadata.yaml): the mcap library reads it, ordered by time, with the counts
+    rosbags reads; read_topics decodes it the same way."""
+    import shutil
+
     from mcap.reader import make_reader
 
     with open(walk.out / f"{BAG_NAME}.mcap", "rb") as f:
@@ -203,6 +207,12 @@ def test_the_plain_mcap_reader_reads_the_file(walk):
         times = [m.log_time for _, _, m in reader.iter_messages(log_time_order=True)]
     assert counts == {t: len(v) for t, v in walk.data.items()}
     assert len(times) == sum(counts.values()) and times == sorted(times)
+    alone = shutil.copy(walk.out / f"{BAG_NAME}.mcap", tmp_path / "alone.mcap")
+    data = read_topics(alone, ["/joint_states", "/tf"])
+    for topic in ("/joint_states", "/tf"):
+        assert [ns for ns, _ in data[topic]] == [ns for ns, _ in walk.data[topic]]
+    last, expected = data["/joint_states"][-1][1], walk.data["/joint_states"][-1][1]
+    assert last.position.tolist() == expected.position.tolist()
 
 
 @pytest.mark.ros

@@ -121,7 +121,7 @@ def odometry_series(odom: list) -> dict[str, np.ndarray]:
 def _moving_average(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray:
     if len(t) < 2:
         return x
-    n = max(1, round(window_s / float(np.median(np.diff(t)))))
+    n = min(len(x), max(1, round(window_s / float(np.median(np.diff(t))))))  # a window at most the run
     kernel = np.ones(n)
     return np.convolve(x, kernel, mode="same") / np.convolve(np.ones_like(x), kernel, mode="same")
 
