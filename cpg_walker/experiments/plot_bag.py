@@ -14,7 +14,11 @@ Read with rosbags; every time axis is the bag time (sim s). Written when the top
   declared, then every change on /parameter_events) and the values the oscillators use (/diagnostics
   ``zeta``/``alpha``: cpg_node applies a command once it walks, smoothed);
 - ``cpg_phases.png``: from /cpg/state (cpg_node's oscillator states, every monitor_period): each DOF's
-  first oscillator's phase (mod 2 pi) and frequency.
+  first oscillator's phase (mod 2 pi) and frequency. The phases stand still while cpg_node plays the
+  recording's opening steps, and run from the hand-over to the CPG on.
+
+The speed's average is over one gait cycle: 1 / the first oscillators' frequency at the start (ζ = 1),
+or 1 s without /cpg/state.
 """
 
 from __future__ import annotations
@@ -117,8 +121,9 @@ def odometry_series(odom: list) -> dict[str, np.ndarray]:
 def _moving_average(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray:
     if len(t) < 2:
         return x
-    n = max(1, round(window_s / float(np.median(np.diff(t)))))
-    return np.convolve(x, np.ones(n) / n, mode="same") if len(x) >= n else x
+    n = min(len(x), max(1, round(window_s / float(np.median(np.diff(t))))))  # a window at most the run
+    kernel = np.ones(n)
+    return np.convolve(x, kernel, mode="same") / np.convolve(np.ones_like(x), kernel, mode="same")
 
 
 def _step_line(ax: Any, steps: list[tuple[float, float]], t_end: float, **kw: Any) -> None:
@@ -213,12 +218,19 @@ def plot_bag(bag: str | Path, out_dir: str | Path) -> dict:
         ax.set_title("Sole loads (/foot_load/*) and touchdowns (robot/contact.py TouchdownDetector)")
         save(fig, "sole_loads.png")
 
+    state = data.get("/cpg/state", [])
+    dofs = cpg_dofs(state)
     if need("modulation.png", "/odom/ground_truth"):
         od = odometry_series(data["/odom/ground_truth"])
+        cycle_s = 1.0
+        if dofs:
+            first = np.asarray(state[0][1].data).reshape(len(dofs), state[0][1].layout.dim[1].size, 3)
+            cycle_s = float(1.0 / np.median(first[:, 0, 1]))
         events, diags = data.get("/parameter_events", []), data.get("/diagnostics", [])
         fig, axes = plt.subplots(4, 1, figsize=(10, 9), sharex=True)
         axes[0].plot(od["t"], od["speed"], lw=0.6, alpha=0.5, label="forward speed")
-        axes[0].plot(od["t"], _moving_average(od["t"], od["speed"], 1.0), lw=1.5, label="1 s average")
+        axes[0].plot(od["t"], _moving_average(od["t"], od["speed"], cycle_s), lw=1.5,
+                     label=f"average over {cycle_s:.2f} s (a gait cycle)" if dofs else "1 s average")
         axes[0].set_ylabel("speed (m/s)")
         axes[0].legend(fontsize=8)
         for ax, name in ((axes[1], "zeta"), (axes[2], "alpha")):
@@ -235,8 +247,6 @@ def plot_bag(bag: str | Path, out_dir: str | Path) -> dict:
         fig.suptitle("Speed, zeta, alpha and heading")
         save(fig, "modulation.png")
 
-    state = data.get("/cpg/state", [])
-    dofs = cpg_dofs(state)
     if not dofs:
         skipped["cpg_phases.png"] = "no /cpg/state (cpg_node's oscillator states) in the recording"
     else:

@@ -25,10 +25,13 @@ from cpg_walker.nodes.recording import CLOCK_TOPIC, BagRecorder
 from cpg_walker.nodes.runtime import (
     HotPath,
     declare,
+    declare_scheduling,
     exit_log,
     float_param,
+    gc_summary,
     int_param,
     parse_cli,
+    settle_process,
     str_param,
 )
 
@@ -67,6 +70,7 @@ class RecorderNode(Node):
             "messages held per subscription until the recorder takes them", 1, 1_000_000, read_only=True)))
         self.duration_ns = round(float(declare(self, "duration", float_param(
             "s of bag time to record, then stop (0 = until stopped)", 0.0, 1e9, read_only=True))) * 1e9)
+        self.scheduling = declare_scheduling(self)  # applied once started (runtime.settle_process)
         sim_time = bool(self.get_parameter("use_sim_time").value)
         out = Path(out_dir) if out_dir else Path.cwd() / time.strftime("recording_%Y_%m_%d-%H_%M_%S",
                                                                           time.gmtime())
@@ -74,6 +78,7 @@ class RecorderNode(Node):
         self.subs: dict[str, object] = {}
         self.skipped: dict[str, str] = {}
         self.hot = HotPath(self, [])
+        self.longest_gap_s = 0.0  # wall s between two polls of the subscriptions (a stall: CPU, GC)
         self.scan()
         self.get_logger().info(f"{READY} {out} ({'sim' if sim_time else 'wall-clock'} time); topics: "
                                f"{', '.join(sorted(self.subs)) or 'none yet'}")
@@ -125,8 +130,27 @@ class RecorderNode(Node):
         return until is not None and (self.bag.clock_ns if self.bag.sim_time else time.time_ns()) >= until
 
     def on_exit(self) -> None:
+        _normal_scheduling()  # completing the bag (the /tf computation) needs no priority
+        t0 = time.monotonic()
         path = self.bag.close()
         exit_log(self, f"wrote {path}: " + json.dumps(self.bag.counts(), sort_keys=True))
+        exit_log(self, "stats " + json.dumps({"close_s": round(time.monotonic() - t0, 3),
+                                              "longest_gap_ms": round(self.longest_gap_s * 1e3, 3),
+                                              "gc": gc_summary(self)}))
+
+
+def _normal_scheduling() -> None:
+    """Back to normal scheduling (SCHED_OTHER) for every thread of this process, where it was raised."""
+    import os
+
+    from cpg_walker.nodes.runtime import _thread_ids
+
+    for tid, _ in _thread_ids():
+        try:
+            if os.sched_getscheduler(tid) != os.SCHED_OTHER:
+                os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+        except (OSError, AttributeError):
+            pass
 
 
 def spin_recorder(node: RecorderNode, stopping: list[bool]) -> None:
@@ -138,12 +162,15 @@ def spin_recorder(node: RecorderNode, stopping: list[bool]) -> None:
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     next_slow = next_scan = 0.0
+    last = time.monotonic()
     while not stopping[0] and not node.done() and node.context.ok():
         if node.subs:
             node.hot.poll(0.005)
         else:
             time.sleep(0.005)
         now = time.monotonic()
+        node.longest_gap_s = max(node.longest_gap_s, now - last)
+        last = now
         if now >= next_slow:
             executor.spin_once(timeout_sec=0.0)
             next_slow = now + 0.02
@@ -178,6 +205,7 @@ def main(argv: list[str] | None = None) -> int:
     status = 0
     try:
         node = RecorderNode()
+        settle_process(node)  # gc.freeze of the start-up objects, GC pauses counted, OS scheduling
         spin_recorder(node, stopping)
     except ValueError as exc:
         print(f"{argv[0]}: error: {exc}", file=sys.stderr)

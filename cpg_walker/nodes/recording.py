@@ -292,27 +292,43 @@ def tf_messages(pairs: list[tuple[int, bytes, bytes]], store: Any) -> tuple[byte
 
 # ------------------------------------------------------------------------------------------- reading
 
-def bag_dir(path: str | Path) -> Path:
-    """The rosbag2 directory of ``path``: a directory with metadata.yaml, or the .mcap file in one;
-    FileNotFoundError naming the problem otherwise."""
-    p = Path(path)
-    d = p if p.is_dir() else p.parent
-    if not p.exists():
-        raise FileNotFoundError(f"{p}: no such bag (a directory with metadata.yaml, or its .mcap file)")
-    if not (d / "metadata.yaml").exists():
-        raise FileNotFoundError(f"{p}: not a rosbag2 recording (no metadata.yaml in {d})")
-    return d
-
-
 def read_topics(path: str | Path, topics: list[str] | None = None) -> dict[str, list[tuple[int, Any]]]:
     """{topic: [(bag time ns, deserialized message), ...]} of a recording (all topics, or ``topics``), in
-    time order, read with rosbags."""
+    time order: a rosbag2 directory (or its .mcap beside metadata.yaml) read with rosbags' Reader, a lone
+    ROS 2 .mcap with the mcap reader (its messages decoded with the rosbags typestore). A missing or
+    unreadable path: FileNotFoundError naming it."""
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"{p}: no such recording (a rosbag2 directory or a .mcap file)")
+    d = p if p.is_dir() else p.parent
+    if (d / "metadata.yaml").exists():
+        return _read_rosbag2(d, topics)
+    if p.is_file() and p.suffix == ".mcap":
+        return _read_mcap(p, topics)
+    raise FileNotFoundError(f"{p}: not a recording (no metadata.yaml in {d}, not a .mcap file)")
+
+
+def _read_rosbag2(d: Path, topics: list[str] | None) -> dict[str, list[tuple[int, Any]]]:
     from rosbags.rosbag2 import Reader
 
     store = typestore()
     out: dict[str, list[tuple[int, Any]]] = {}
-    with Reader(bag_dir(path)) as reader:
+    with Reader(d) as reader:
         conns = [c for c in reader.connections if topics is None or c.topic in topics]
         for conn, ns, raw in reader.messages(connections=conns):
             out.setdefault(conn.topic, []).append((ns, deserialize(store, raw, conn.msgtype)))
+    return out
+
+
+def _read_mcap(p: Path, topics: list[str] | None) -> dict[str, list[tuple[int, Any]]]:
+    from mcap.reader import make_reader
+
+    store = typestore()
+    out: dict[str, list[tuple[int, Any]]] = {}
+    with open(p, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages(topics=topics, log_time_order=True):
+            if channel.message_encoding != "cdr" or schema is None:
+                continue
+            out.setdefault(channel.topic, []).append(
+                (message.log_time, deserialize(store, message.data, schema.name)))
     return out

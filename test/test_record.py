@@ -1,0 +1,319 @@
+"""Recording the graph (nodes/recorder_node.py, nodes/recording.py) and plotting it (experiments/plot_bag.py).
+
+One short lockstep walk through the graph with ``record=True`` (what ``cpg-walker walk --record`` runs) and a
+zeta change through cpg_node's SetParameters service, read back with rosbags and with the plain ``mcap``
+reader; beside it ``cpg-walker record --duration`` records the same graph from another process. Counts are
+derived from config/sim.yaml (control and odometry periods) and the walk's duration. The unit tests at the
+end need no graph."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from cpg_walker.nodes.recording import BAG_NAME, read_topics
+from cpg_walker.paths import ros_parameters
+
+#: sim s of the walk, the time of its zeta change (sent through /cpg/set_parameters), the side recording.
+DURATION_S, ZETA_AT_S, ZETA_TO, SIDE_S = 2.0, 0.5, 0.8, 1.0
+#: Control periods at the start whose target/torque the recorder may miss (the counts test): 1 seen.
+START_TICKS = 10
+SIM = ros_parameters("sim.yaml", "sim")
+TYPES = {
+    "/clock": "rosgraph_msgs/msg/Clock", "/joint_states": "sensor_msgs/msg/JointState",
+    "/imu": "sensor_msgs/msg/Imu", "/tf": "tf2_msgs/msg/TFMessage", "/tf_static": "tf2_msgs/msg/TFMessage",
+    "/joint_targets": "sensor_msgs/msg/JointState", "/joint_torques": "sensor_msgs/msg/JointState",
+    "/parameter_events": "rcl_interfaces/msg/ParameterEvent", "/odom/ground_truth": "nav_msgs/msg/Odometry",
+    "/foot_load/left": "geometry_msgs/msg/WrenchStamped",
+    "/foot_load/right": "geometry_msgs/msg/WrenchStamped",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray", "/cpg/state": "std_msgs/msg/Float64MultiArray",
+    "/rosout": "rcl_interfaces/msg/Log", "/sim/fallen": "std_msgs/msg/Bool",
+}
+
+
+def _ns(t_s: float) -> int:
+    return round(t_s * 1e9)
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory):
+    """The recorded walk (and the side recording), once for the module, on a domain of its own."""
+    from ros_helpers import ANSWER_S, kill_nodes, reserve_domain, sim_deadline
+
+    import cpg_walker.nodes.graph as graph_module
+    from cpg_walker.experiments.walk_graph import run_graph_walk
+    from cpg_walker.nodes.graph import isolated_env
+
+    out = tmp_path_factory.mktemp("walk")
+    side = out / "side"
+    domain, lock = reserve_domain()
+    try:
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(graph_module, "quiet_domain_id", lambda attempts=5: domain)
+            with open(out / "side_record.log", "wb") as log:
+                rec = subprocess.Popen(
+                    [sys.executable, "-m", "cpg_walker.cli.main", "record", "--out", str(side),
+                     "--duration", str(SIDE_S)], env=isolated_env(domain), stdout=log,
+                    stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
+            try:
+                report = run_graph_walk(out, duration=DURATION_S, schedule=[(ZETA_AT_S, ZETA_TO, 1.0)],
+                                        record=True, timeout=sim_deadline(DURATION_S))
+                side_status = rec.wait(timeout=ANSWER_S)
+            finally:
+                if rec.poll() is None:
+                    rec.kill()
+                    rec.wait()
+    finally:
+        kill_nodes(domain)
+        lock.close()
+    return SimpleNamespace(out=out, report=report, side=side, side_status=side_status,
+                           side_log=(out / "side_record.log").read_text(errors="replace"),
+                           data=read_topics(out))
+
+
+def _stamps(samples: list) -> list[int]:
+    return sorted({ns for ns, _ in samples})
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_bag_holds_every_topic_with_its_type(walk):
+    from rosbags.rosbag2 import Reader
+
+    bags = list(walk.out.glob("*.mcap"))
+    assert [p.name for p in bags] == [f"{BAG_NAME}.mcap"] and walk.report["bag"] == str(bags[0].resolve())
+    with Reader(walk.out) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+    assert {t: types.get(t) for t in TYPES} == TYPES
+    assert not walk.report["fell"]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_counts_follow_the_sim_time_and_the_control_period(walk):
+    """Every control period of the walk is in the bag once per sensor topic (re-sent lockstep states
+    repeat a stamp), each message at its stamp's bag time; odometry and /tf every odom_period. The
+    controllers' targets and torques of every tick from the first recorded one: like ``ros2 bag record``,
+    the recorder subscribes to a topic once it has seen its publisher, so the very first target and torque
+    (sent as soon as the sim's first state arrives) can go out before the recorder's subscription is
+    matched; the sim's start-up state is re-sent until the controller answers, so it is always there."""
+    period, odom_period = SIM["control_period"], SIM["odom_period"]
+    ticks = [_ns(k * period) for k in range(round(DURATION_S / period))]
+    d = walk.data
+    for topic in ("/clock", "/joint_states", "/imu", "/foot_load/left", "/foot_load/right"):
+        assert _stamps(d[topic]) == ticks, topic
+    for topic in ("/joint_targets", "/joint_torques"):
+        stamps = _stamps(d[topic])
+        assert stamps[0] <= ticks[START_TICKS] and {t for t in ticks if t >= stamps[0]} <= set(stamps), topic
+    for topic in ("/joint_states", "/imu", "/odom/ground_truth"):
+        assert all(ns == m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for ns, m in d[topic]), topic
+    odom = _stamps(d["/odom/ground_truth"])
+    assert all(ns % _ns(odom_period) == 0 for ns in odom) and len(odom) >= DURATION_S / odom_period - 1
+    assert _stamps(d["/tf"]) == odom and len(d["/tf"]) == len(odom)
+    assert len(d["/tf_static"]) == 1
+
+
+def _matrix(transform) -> np.ndarray:
+    import mujoco
+
+    q, p = transform.rotation, transform.translation
+    r = np.zeros(9)
+    mujoco.mju_quat2Mat(r, np.array([q.w, q.x, q.y, q.z]))
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = r.reshape(3, 3), (p.x, p.y, p.z)
+    return out
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_tf_is_the_simulated_pose(walk):
+    """/tf + /tf_static form one tree over every link of the model and the imu, rooted at the odometry's
+    frame; its base transform is the odometry pose of the same stamp, bit for bit; and a loaded sole
+    (load above the touchdown threshold) is on the floor: its frame as high as when the robot stands."""
+    import mujoco
+
+    from cpg_walker.robot import frames
+    from cpg_walker.robot.contact import CONTACT_ON_N
+    from cpg_walker.robot.hoap2 import Hoap2Sim
+
+    d = walk.data
+    sim = Hoap2Sim()
+    mujoco.mj_kinematics(sim.model, sim.data)
+    standing_z = {side: float(sim.data.xpos[sim.model.body(body).id][2])
+                  for side, body in (("left", "lleg_sole"), ("right", "rleg_sole"))}
+    links = {frames.link_name(sim.model.body(b).name) for b in range(1, sim.model.nbody)}
+    static = {t.child_frame_id: t for t in d["/tf_static"][0][1].transforms}
+    odom = dict(d["/odom/ground_truth"])
+    loads = {side: dict(d[f"/foot_load/{side}"]) for side in ("left", "right")}
+    checked = 0
+    for ns, msg in d["/tf"]:
+        tree = {t.child_frame_id: t for t in msg.transforms}
+        assert not set(tree) & set(static)
+        tree.update(static)
+        pose = odom[ns].pose.pose
+        base = tree[frames.BASE_LINK]
+        assert base.header.frame_id == odom[ns].header.frame_id
+        assert (base.transform.translation.x, base.transform.translation.y, base.transform.translation.z,
+                base.transform.rotation.w, base.transform.rotation.x, base.transform.rotation.y,
+                base.transform.rotation.z) == (pose.position.x, pose.position.y, pose.position.z,
+                                               pose.orientation.w, pose.orientation.x, pose.orientation.y,
+                                               pose.orientation.z)
+        assert set(tree) == links | {frames.IMU_FRAME}
+        for side, sole in (("left", frames.LEFT_SOLE), ("right", frames.RIGHT_SOLE)):
+            if loads[side][ns].wrench.force.z <= CONTACT_ON_N:
+                continue
+            world, frame = np.eye(4), sole
+            while frame in tree:
+                world = _matrix(tree[frame].transform) @ world
+                frame = tree[frame].header.frame_id
+            assert frame == odom[ns].header.frame_id
+            assert world[2, 3] == pytest.approx(standing_z[side], abs=0.003), (ns, side)
+            checked += 1
+    assert checked >= len(d["/tf"])  # at least one foot carries the robot at every sample
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_zeta_change_is_in_the_parameter_events(walk):
+    changes = [(ns, p.value.double_value) for ns, ev in walk.data["/parameter_events"] if ev.node == "/cpg"
+               for p in ev.changed_parameters if p.name == "zeta"]
+    assert len(changes) == 1
+    ns, value = changes[0]
+    assert value == ZETA_TO and ns >= _ns(ZETA_AT_S)
+    assert walk.report["schedule"][0]["accepted"]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_plain_mcap_reader_reads_the_file(walk, tmp_path):
+    """The .mcap alone (no metadata.yaml): the mcap library reads it, ordered by time, with the counts
+    rosbags reads; read_topics decodes it the same way."""
+    import shutil
+
+    from mcap.reader import make_reader
+
+    with open(walk.out / f"{BAG_NAME}.mcap", "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        counts = {c.topic: summary.statistics.channel_message_counts[c.id] for c in summary.channels.values()}
+        assert reader.get_header().profile == "ros2"
+        assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
+        assert {s.encoding for s in summary.schemas.values()} == {"ros2msg"}
+        times = [m.log_time for _, _, m in reader.iter_messages(log_time_order=True)]
+    assert counts == {t: len(v) for t, v in walk.data.items()}
+    assert len(times) == sum(counts.values()) and times == sorted(times)
+    alone = shutil.copy(walk.out / f"{BAG_NAME}.mcap", tmp_path / "alone.mcap")
+    data = read_topics(alone, ["/joint_states", "/tf"])
+    for topic in ("/joint_states", "/tf"):
+        assert [ns for ns, _ in data[topic]] == [ns for ns, _ in walk.data[topic]]
+    last, expected = data["/joint_states"][-1][1], walk.data["/joint_states"][-1][1]
+    assert last.position.tolist() == expected.position.tolist()
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_cpg_walker_record_stops_after_its_duration(walk):
+    """``cpg-walker record --duration`` beside the walk: it ends by itself with a complete bag of that much
+    sim time, from its first /clock."""
+    assert walk.side_status == 0, walk.side_log[-2000:]
+    d = read_topics(walk.side)
+    clock = _stamps(d["/clock"])
+    assert clock[-1] - clock[0] == _ns(SIDE_S)
+    assert len(d["/tf"]) >= 1 and len(d["/tf_static"]) == 1
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_plot_writes_the_pngs(walk, tmp_path):
+    import json
+
+    from cpg_walker.cli.main import main
+
+    assert main(["plot", str(walk.out / f"{BAG_NAME}.mcap"), "--out", str(tmp_path)]) == 0
+    names = ["targets_vs_states.png", "tilt.png", "sole_loads.png", "modulation.png", "cpg_phases.png"]
+    summary = json.loads((tmp_path / "plot.json").read_text())
+    assert summary["files"] == names and summary["not_plotted"] == {}
+    for name in names:
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_robot_description_is_recorded(walk):
+    """Needs sim_node's /robot_description (the urdf branch): latched, so recorded once, a URDF."""
+    msgs = walk.data.get("/robot_description", [])
+    assert len(msgs) == 1
+    assert "<robot" in msgs[0][1].data
+
+
+# ------------------------------------------------------------------------------ no graph needed
+
+def _serialized(msg) -> bytes:
+    from rclpy.serialization import serialize_message
+
+    return bytes(serialize_message(msg))
+
+
+def test_bag_times_are_stamps_or_the_newest_clock(tmp_path):
+    """Stamped messages at their stamp, unstamped ones (and wall-clock stamps) at the newest /clock."""
+    from builtin_interfaces.msg import Time
+    from rcl_interfaces.msg import Log
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    from cpg_walker.nodes.recording import BagRecorder
+
+    with BagRecorder(tmp_path) as bag:
+        for topic, msgtype in (("/clock", "rosgraph_msgs/msg/Clock"), ("/js", "sensor_msgs/msg/JointState"),
+                               ("/x", "std_msgs/msg/Float64MultiArray"),
+                               ("/rosout", "rcl_interfaces/msg/Log")):
+            assert bag.add_topic(topic, msgtype) is None
+        assert "unknown" in bag.add_topic("/y", "no_msgs/msg/Nothing")
+        bag.write("/clock", _serialized(Clock(clock=Time(sec=1, nanosec=500))))
+        js = JointState(name=["a"], position=[1.0])
+        js.header.stamp = Time(sec=1, nanosec=2_000_500)  # a target sent one period ahead
+        bag.write("/js", _serialized(js))
+        bag.write("/x", _serialized(Float64MultiArray(data=[1.0])))
+        bag.write("/rosout", _serialized(Log(stamp=Time(sec=1_700_000_000))))
+    got = {topic: [ns for ns, _ in v] for topic, v in read_topics(tmp_path).items()}
+    assert got["/clock"] == [1_000_000_500] and got["/js"] == [1_002_000_500]
+    assert got["/x"] == [1_000_000_500] and got["/rosout"] == [1_000_000_500]
+    assert "/tf" not in got  # no odometry: no /tf sample (the static transforms do not need one)
+    assert len(got["/tf_static"]) == 1
+
+
+def test_odometry_and_joint_states_pair_by_stamp_in_any_order():
+    from cpg_walker.nodes.recording import TfPairs
+
+    pairs = TfPairs()
+    pairs.joints(10, b"j10")
+    pairs.odom(20, b"o20")
+    pairs.odom(10, b"o10")
+    pairs.joints(20, b"j20")
+    pairs.joints(20, b"j20")  # re-sent: its odometry is already paired
+    assert pairs.pairs == [(10, b"o10", b"j10"), (20, b"o20", b"j20")]
+
+
+def test_fast_dds_end_padding_is_read():
+    """Fast DDS sends 4 unset bytes after an empty trailing float64 sequence: the values still read."""
+    from sensor_msgs.msg import JointState
+
+    from cpg_walker.nodes.recording import deserialize, typestore
+
+    raw = _serialized(JointState(name=["a", "b"], position=[1.0, 2.0], velocity=[3.0, 4.0]))
+    msg = deserialize(typestore(), raw, "sensor_msgs/msg/JointState")
+    assert list(msg.name) == ["a", "b"] and list(msg.position) == [1.0, 2.0] and len(msg.effort) == 0
+    assert math.isfinite(sum(msg.velocity))
+
+
+def test_a_missing_bag_is_one_clear_error(tmp_path):
+    from cpg_walker.cli.main import main
+
+    assert main(["plot", str(tmp_path / "nope"), "--out", str(tmp_path)]) == 2
+    assert main(["plot", str(tmp_path), "--out", str(tmp_path / "p")]) == 2
