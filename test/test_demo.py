@@ -76,6 +76,18 @@ def test_status_line_from_messages():
     assert "zeta +1.40 alpha 0.50" in line and "cpg walking" in line and "FALLEN" in line
 
 
+def test_status_off_a_terminal_is_plain_lines():
+    import io
+
+    from cpg_walker.experiments.demo import StatusDisplay
+
+    buf = io.StringIO()  # not a terminal: no progress bar, no control characters
+    with StatusDisplay(10.0, plain_every_s=0.0, stream=buf) as show:
+        for line, t in (("sim 0.0 s", 0.0), ("sim 0.0 s", 0.5), ("sim 1.0 s", 1.0)):
+            show(line, t)
+    assert buf.getvalue() == "sim 0.0 s\nsim 1.0 s\n"
+
+
 # ------------------------------------------------------------------------------------- end to end
 
 def _demo(out, ros_domain, duration: float) -> subprocess.Popen:
@@ -165,3 +177,4 @@ def test_sigint_stops_every_node_and_still_writes_the_outputs(tmp_path, ros_doma
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is True and 3.0 <= summary["duration_s"] < 40.0
     _check_outputs(out, summary)
+

@@ -185,7 +185,7 @@ class StatusDisplay:
         self.duration, self.plain_every_s = duration, plain_every_s
         self.progress: Any = None
         self._last_plain = -math.inf
-        self.last = ""
+        self.last = self._printed = ""
 
     def __enter__(self) -> StatusDisplay:
         if self.console.is_terminal:
@@ -204,13 +204,18 @@ class StatusDisplay:
             self.progress.update(self.task, completed=min(sim_s, self.duration), status=line)
         elif time.monotonic() - self._last_plain >= self.plain_every_s:
             self._last_plain = time.monotonic()
+            self._plain(line)
+
+    def _plain(self, line: str) -> None:
+        if line != self._printed:
             print(line, file=self.console.file, flush=True)
+            self._printed = line
 
     def __exit__(self, *exc: object) -> None:
         if self.progress is not None:
             self.progress.stop()
         elif self.last:
-            print(self.last, file=self.console.file, flush=True)
+            self._plain(self.last)  # the final status
 
 
 @contextlib.contextmanager
