@@ -23,10 +23,11 @@ $(STAMP): requirements.txt setup.py setup.cfg package.xml
 	@$(PY) -c "import rclpy, mujoco, numpy, cpg_walker" || { echo "setup: the environment is incomplete (see pip's output above)"; exit 1; }
 	@touch $(STAMP)
 
-## demo: set up, then run the main job (the walk through the ROS graph; DURATION sim s) into $(OUT)/
+## demo: set up, then run the main job (the paper's Section II and learning in-process, then the walk
+## through the ROS graph for DURATION sim s) into $(OUT)/
 DURATION ?= 60
 demo: $(STAMP)
-	$(VENV)/bin/cpg-walker demo --duration $(DURATION) --out $(OUT)
+	$(VENV)/bin/cpg-walker demo --paper --duration $(DURATION) --out $(OUT)
 
 ## test: set up, lint, then the whole test suite (unit + multi-process)
 test: $(STAMP)

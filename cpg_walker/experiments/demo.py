@@ -331,6 +331,8 @@ def run_demo(out_dir: str | Path, duration: float, pacing: str = "lockstep", dom
         say("interrupted: every node has stopped; writing what was recorded (Ctrl-C again to give up)")
     bag = out / f"{BAG_NAME}.mcap"
     if not bag.exists():
+        if interrupted:  # before the recorder had started: nothing to write
+            raise KeyboardInterrupt
         raise RuntimeError(f"no recording was written ({bag})")
     files = [bag.name]
     say("== plots from the recording (cpg-walker plot)")
