@@ -231,6 +231,21 @@ def window_metrics(r, t0: float, t1: float | None = None) -> dict:
     }
 
 
+#: what a result_cell says, for the tables' captions
+CELL_LEGEND = ("F t s (+d) = fell at sim time t, d s after the command; else speed over the window's second "
+               "half, heading change (stride means) and lateral drift over the window")
+
+
+def result_cell(m: dict) -> str:
+    """One walk in a markdown table cell: "error", "F t s (+d)" (fell at sim time t, d s after the
+    command), else speed over the window's second half, heading change and lateral drift."""
+    if "error" in m:
+        return "error"
+    if m["fell"]:
+        return f"F {m['fall_time_s']:.1f} s (+{m['fall_time_s'] - m['t_cmd_s']:.1f})"
+    return f"{m['steady_speed_mps']:+.3f} m/s {m['heading_change_deg']:+.0f}° {m['lateral_drift_m']:+.2f} m"
+
+
 def _safe(fn: Callable, item):
     try:
         return fn(item)
