@@ -14,7 +14,7 @@ from cpg_walker.cli.main import main
 from cpg_walker.experiments.config_file import ConfigError
 from cpg_walker.experiments.sweep import fall_thresholds, load_config, run_sweep
 from cpg_walker.experiments.walk_runs import WalkSpec, start_time, variant, window_metrics
-from cpg_walker.walker.loop import ReplayResult
+from cpg_walker.walker.loop import ReplayResult, summarize
 
 TINY = """\
 duration_after_s: 1.0
@@ -98,6 +98,25 @@ def test_window_metrics_on_a_known_path():
     m = window_metrics(_result(xy, heading, t, touch), 5.0)  # across the turn: 0.5 m on, 1 m to the left
     assert (m["distance_m"], m["lateral_drift_m"], m["heading_change_deg"]) == pytest.approx((0.5, 1.0, 90.0),
                                                                                              abs=0.002)
+
+
+def test_heading_change_is_measured_over_whole_strides_not_one_sample_of_the_sway():
+    """A straight walk whose torso yaws ±6° within each 2.5 s stride has no heading change, wherever the
+    window starts or ends in the stride; a real turn of 10° on top of the sway is measured as 10°."""
+    t = np.arange(1, 6001) * 0.01
+    sway = np.where(t >= 1.0, math.radians(6.0) * np.sin(2 * math.pi * (t - 1.0) / 2.5), 0.0)  # stands 1 s
+    xy = np.c_[0.08 * t, 0 * t]
+    touch = {"left": [], "right": list(np.arange(1.0, 60.0, 2.5))}
+    for t0 in (10.0, 10.6, 11.2):
+        m = window_metrics(_result(xy, sway, t, touch), t0, 57.3)
+        assert m["heading_change_deg"] == pytest.approx(0.0, abs=0.1), (t0, m)
+    turned = sway + np.where(t > 30.0, math.radians(10.0), 0.0)
+    m = window_metrics(_result(xy, turned, t, touch), 10.6, 57.3)
+    assert m["heading_change_deg"] == pytest.approx(10.0, abs=0.1)
+    r = _result(xy, sway, t, touch)
+    s = summarize(r)
+    assert s["heading_change_deg"] == pytest.approx(0.0, abs=0.1)
+    assert s["yaw_change_final_sample_deg"] == pytest.approx(math.degrees(sway[-1]), abs=0.01)
 
 
 def test_fall_thresholds_are_the_smallest_zeta_that_fell():

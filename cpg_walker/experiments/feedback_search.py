@@ -35,7 +35,15 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.experiments.config_file import Config, deep_merge
-from cpg_walker.experiments.walk_runs import Push, WalkSpec, run_many, run_walk, start_time
+from cpg_walker.experiments.walk_runs import (
+    CELL_LEGEND,
+    Push,
+    WalkSpec,
+    result_cell,
+    run_many,
+    run_walk,
+    start_time,
+)
 from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig, default_pathways
 
 _SCENARIO_KEYS = {"name", "zeta", "alpha", "start", "duration_after_s", "friction_scale", "push", "schedule"}
@@ -307,23 +315,14 @@ def holdout(out_dir: str | Path, jobs: int | None = None, quick: bool = False, c
     return report
 
 
-def _cell(m: dict) -> str:
-    if "error" in m:
-        return "error"
-    if m["fell"]:
-        return f"F +{m['fall_time_s'] - m['t_cmd_s']:.1f}s"
-    return f"{m['steady_speed_mps']:+.3f} m/s {m['heading_change_deg']:+.0f}° {m['lateral_drift_m']:+.2f} m"
-
-
 def holdout_markdown(report: dict, names: list[str]) -> str:
     lines = ["# feedback-search: searched vs held-out", "",
              f"v1 (open-loop ζ = 1 speed) = {report['v1_mps']} m/s; pathways "
-             f"{', '.join(report['pathways'])}; cell: F +t = fell t s after the command, else speed (2nd "
-             "half), heading change, lateral drift; (cost).", "",
+             f"{', '.join(report['pathways'])}; cell: {CELL_LEGEND}; (cost).", "",
              "| scenario | set | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
     for row in report["rows"]:
         lines.append(f"| {row['scenario']} | {row['set']} | "
-                     + " | ".join(f"{_cell(row[n])} ({row[n]['cost']:.1f})" for n in names) + " |")
+                     + " | ".join(f"{result_cell(row[n])} ({row[n]['cost']:.1f})" for n in names) + " |")
     lines += ["", "| objective (sum) | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
     for st in ("searched", "held-out"):
         lines.append(f"| {st} | " + " | ".join(str(report[f"objective_{n}"][st]) for n in names) + " |")

@@ -23,7 +23,16 @@ import math
 from pathlib import Path
 
 from cpg_walker.experiments.config_file import Config, deep_merge
-from cpg_walker.experiments.walk_runs import Push, WalkSpec, run_many, run_walk, start_time, variant
+from cpg_walker.experiments.walk_runs import (
+    CELL_LEGEND,
+    Push,
+    WalkSpec,
+    result_cell,
+    run_many,
+    run_walk,
+    start_time,
+    variant,
+)
 from cpg_walker.robot.joints import PAPER_LEG_DOFS
 
 FIG8_DOFS = ("Hip1", "Ankle2", "Ankle1", "Knee")
@@ -175,14 +184,6 @@ def run_sweep(out_dir: str | Path, quick: bool = False, jobs: int | None = None,
 
 
 # ------------------------------------------------------------------------------------------- summaries
-def _cell(r: dict) -> str:
-    if "error" in r:
-        return "error"
-    if r["fell"]:
-        return f"F {r['fall_time_s']:.1f}s"
-    return f"ok {r['steady_speed_mps']:+.3f} {r['heading_change_deg']:+.0f}°"
-
-
 def fall_thresholds(runs: list[dict]) -> dict:
     """Per variant × start: the smallest |ζ| forward and backward that fell (None: none fell), and
     whether ζ = 1.5 and ζ = −1.0 walked (when in the grid)."""
@@ -211,16 +212,14 @@ def markdown(report: dict) -> str:
     zetas = sorted(dict.fromkeys(r["zeta"] for r in runs), key=lambda z: (z < 0, abs(z)))
     cols = [(s, v) for s in starts for v in variants]
     lines = [f"# cpg-walker sweep{' --quick' if report['quick'] else ''}", "",
-             f"{cfg['duration_after_s']:g} s walked after the command; cell: F t = fell at t s (sim time "
-             "from the start), else ok, speed over the window's second half (m/s), heading change over the "
-             "window.",
+             f"{cfg['duration_after_s']:g} s walked after the command; cell: {CELL_LEGEND}.",
              "", "| ζ | " + " | ".join(f"{s}: {v}" for s, v in cols) + " |",
              "|---|" + "---|" * len(cols)]
     for z in zetas:
         cells = []
         for s, v in cols:
             hit = [r for r in runs if r["zeta"] == z and r["start"] == s and r["variant"] == v]
-            cells.append(_cell(hit[0]) if hit else "")
+            cells.append(result_cell(hit[0]) if hit else "")
         lines.append(f"| {z:+g} | " + " | ".join(cells) + " |")
     lines += ["", "Fall thresholds (smallest |ζ| that fell; as measured above):", "",
               "| variant/start | first fall forward | first fall backward | ζ=+1.5 walked | ζ=−1 walked |",

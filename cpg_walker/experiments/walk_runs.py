@@ -27,6 +27,7 @@ import numpy as np
 from cpg_walker.walker.feedback import PAPER_PATHWAYS, FeedbackConfig, FeedbackController, default_pathways
 from cpg_walker.walker.gait_source import CPGGaitSource, FeedbackGaitSource
 from cpg_walker.walker.learning import cpg_defaults, load_controller
+from cpg_walker.walker.loop import heading_at
 
 #: the paper's lateral law as printed (eqs 14-15 with |psi|)
 PAPER_OVERRIDES = {"lateral_mode": "abs"}
@@ -200,14 +201,15 @@ def run_walk(spec: WalkSpec) -> dict:
 
 def window_metrics(r, t0: float, t1: float | None = None) -> dict:
     """Distance, drift, heading change, speeds and step length of ReplayResult ``r`` from sim time t0 to
-    t1 (None: the end; a fall ends it earlier)."""
+    t1 (None: the end; a fall ends it earlier). Heading change: walker.loop.heading_at (the yaw averaged
+    over a stride) at the end minus at t0."""
     if t1 is not None:
         n = max(1, int(np.searchsorted(r.t, t1, side="right")))
         r = copy.copy(r)
         r.t, r.base_xy, r.heading = r.t[:n], r.base_xy[:n], r.heading[:n]
         r.touchdowns = {k: [x for x in v if x <= t1] for k, v in r.touchdowns.items()}
     i0 = min(int(np.searchsorted(r.t, t0)), len(r.t) - 1)
-    h0 = float(r.heading[i0])
+    h0 = heading_at(r, float(r.t[i0]))
     fwd = np.array([math.cos(h0), math.sin(h0)])
     left = np.array([-math.sin(h0), math.cos(h0)])
     d = r.base_xy[-1] - r.base_xy[i0]
@@ -220,13 +222,28 @@ def window_metrics(r, t0: float, t1: float | None = None) -> dict:
         "window_s": round(span, 3),
         "distance_m": round(dist, 4),
         "lateral_drift_m": round(float(d @ left), 4),
-        "heading_change_deg": round(math.degrees(float(r.heading[-1] - h0)), 2),
+        "heading_change_deg": round(math.degrees(heading_at(r, float(r.t[-1])) - h0), 2),
         "mean_speed_mps": round(dist / span, 4) if span > 0 else 0.0,
         "steady_speed_mps": round(float((r.base_xy[-1] - r.base_xy[im]) @ fwd) / half, 4) if half > 0
         else 0.0,
         "steps": steps,
         "step_length_m": round(dist / steps, 4) if steps else None,
     }
+
+
+#: what a result_cell says, for the tables' captions
+CELL_LEGEND = ("F t s (+d) = fell at sim time t, d s after the command; else speed over the window's second "
+               "half, heading change (stride means) and lateral drift over the window")
+
+
+def result_cell(m: dict) -> str:
+    """One walk in a markdown table cell: "error", "F t s (+d)" (fell at sim time t, d s after the
+    command), else speed over the window's second half, heading change and lateral drift."""
+    if "error" in m:
+        return "error"
+    if m["fell"]:
+        return f"F {m['fall_time_s']:.1f} s (+{m['fall_time_s'] - m['t_cmd_s']:.1f})"
+    return f"{m['steady_speed_mps']:+.3f} m/s {m['heading_change_deg']:+.0f}° {m['lateral_drift_m']:+.2f} m"
 
 
 def _safe(fn: Callable, item):

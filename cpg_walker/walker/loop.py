@@ -157,6 +157,29 @@ def run_replay(
     return result
 
 
+def measured_stride(r: ReplayResult, t: float) -> float | None:
+    """The stride period (s) walked just before sim time ``t``: the median of the last two intervals
+    between right touchdowns at or before ``t``, if the robot is still stepping then (the last touchdown
+    within two intervals of ``t``); None otherwise (standing, or too few steps)."""
+    td = [x for x in r.touchdowns["right"] if x <= t]
+    if len(td) < 3:
+        return None
+    stride = float(np.median(np.diff(td[-3:])))
+    return stride if t - td[-1] <= 2.0 * stride else None
+
+
+def heading_at(r: ReplayResult, t: float, stride_s: float | None = None) -> float:
+    """The walk's heading (rad) at sim time ``t``: the torso yaw averaged over the stride that ends at
+    ``t`` (the torso yaws several degrees each way within a stride, so one sample says little about
+    where the walk goes); ``stride_s`` None: ``measured_stride``. Without a stride (standing, first
+    steps) or a full stride of samples before ``t``, the yaw sampled at ``t``."""
+    i = max(1, int(np.searchsorted(r.t, t, side="right")))
+    stride = measured_stride(r, t) if stride_s is None else stride_s
+    if stride is None or r.t[0] > t - stride:
+        return float(r.heading[i - 1])
+    return float(np.mean(r.heading[(r.t > t - stride) & (r.t <= t)]))
+
+
 def summarize(r: ReplayResult, start_xy: np.ndarray | None = None, period_s: float | None = None) -> dict:
     """Distance along the starting heading, lateral drift, heading change, speed, steps, contact timing."""
     if len(r.t) == 0:
@@ -176,11 +199,11 @@ def summarize(r: ReplayResult, start_xy: np.ndarray | None = None, period_s: flo
         "duration_s": round(float(r.duration_s), 3),
         "distance_m": round(distance, 4),
         "lateral_drift_m": round(float(d @ left), 4),
-        "heading_change_deg": round(math.degrees(float(r.heading[-1] - h0)), 2),
-        # the torso yaws a few degrees within each stride: the mean over the last stride (period_s, else
-        # 2.5 s, the learned stride) shows where the walk is heading without that sway
-        "heading_change_stride_mean_deg": round(math.degrees(float(
-            np.mean(r.heading[r.t >= r.t[-1] - (period_s or 2.5)]) - h0)), 2),
+        # from the standing yaw to the heading over the last stride (heading_at); the torso's yaw at the
+        # last sample, which includes the within-stride sway, beside it
+        "heading_change_deg": round(math.degrees(heading_at(r, float(r.t[-1]), _stride_or(r, period_s))
+                                                 - h0), 2),
+        "yaw_change_final_sample_deg": round(math.degrees(float(r.heading[-1] - h0)), 2),
         "mean_speed_mps": round(distance / r.duration_s, 4) if r.duration_s > 0 else 0.0,
         "steps": int(steps),
         "min_torso_height_m": round(float(r.base_z.min()), 4),
@@ -192,6 +215,12 @@ def summarize(r: ReplayResult, start_xy: np.ndarray | None = None, period_s: flo
     if period_s is not None:
         m["gait_period_s"] = round(float(period_s), 3)
     return m
+
+
+def _stride_or(r: ReplayResult, period_s: float | None) -> float | None:
+    """The stride measured at the end of ``r``, else ``period_s`` (e.g. the recording's cycle)."""
+    measured = measured_stride(r, float(r.t[-1]))
+    return measured if measured is not None else period_s
 
 
 def recording_setup(gait: str = "walk", data: str | None = None, duration: float | None = None,
