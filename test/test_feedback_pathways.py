@@ -112,6 +112,18 @@ def test_reset_both_targets_per_foot_and_direction():
     assert paper.reset_events(-1.0) == [(cfg.reset_phase_rad, cfg.reset_strength)]
 
 
+def test_reset_both_is_held_off_below_its_zeta_and_alpha_gates():
+    cfg = FeedbackConfig.load(reset_both_strength=0.5, reset_phase_rad=-1.5, reset_min_abs_zeta=0.75,
+                              reset_min_alpha=0.75)
+    fb = FeedbackController(cfg, ("reset_both",))
+    fb.touchdowns = (False, True)
+    assert fb.reset_events(1.0, 1.0) == [(-1.5, 0.5)]
+    assert fb.reset_events(1.0, 0.75) == [(-1.5, 0.5)]  # at the gate: on
+    assert fb.reset_events(1.0, 0.5) == []  # shorter steps
+    assert fb.reset_events(0.5, 1.0) == []  # slow, or passing through ζ = 0
+    assert fb.reset_events(-0.5, 1.0) == []
+
+
 def test_left_reset_is_a_time_shift_that_keeps_relative_phases(learned):
     ctrl = _ctrl(learned)
     ctrl.reset_phase(0.4)
@@ -298,7 +310,7 @@ def test_run_time_api_validates(learned):
     ("amp_slow_slope_knee", -2.5),
     ("reset_phase_backward_rad", 4.0), ("tilt_time_constant_s", -0.1), ("gain_scale", "x"),
     ("lateral_sign", 0.5), ("reset_strength", 0.0), ("heading_reference", "north"),
-    ("reset_min_abs_zeta", -1.0),
+    ("reset_min_abs_zeta", -1.0), ("reset_min_alpha", -0.1),
 ])
 def test_bad_config_values_are_refused_naming_the_field(field, value):
     with pytest.raises(ValueError, match=field):

@@ -34,7 +34,8 @@ How we read the paper:
   touchdown of either foot, Δ = κ·wrap(φ_TD − θ_ref) with φ_TD the right-touchdown phase for the walking
   direction (forward ``reset_phase_rad``, backward ``reset_phase_backward_rad``) and φ_TD + π at a left
   touchdown (the legs are half a cycle apart), none while |ζ| < ``reset_min_abs_zeta`` (a reversal
-  passing through ζ = 0 has no touchdown phase). ``heading``: keeps the IMU yaw on a reference (the yaw
+  passing through ζ = 0 has no touchdown phase) or α < ``reset_min_alpha`` (shorter steps touch down at
+  other phases). ``heading``: keeps the IMU yaw on a reference (the yaw
   when feedback takes over, or the first observed one: ``heading_reference``; advanced by the commanded
   ``turn_rate``) with an antisymmetric hip-yaw
   oscillation q_yaw,R = −q_yaw,L = u·cos(θ_ref − φ_TD), u = heading_gain·(filtered yaw error): each
@@ -107,6 +108,7 @@ class FeedbackConfig:
     reset_both_strength: float  # κ of the soft reset at either foot's touchdown
     reset_phase_backward_rad: float  # right Hip2 oscillator 0 phase at right touchdown walking backward
     reset_min_abs_zeta: float  # no reset_both while |applied ζ| is below this (reversing through ζ = 0)
+    reset_min_alpha: float  # no reset_both while the applied α is below this (shorter steps)
     # ours ("heading")
     heading_gain: float  # hip-yaw amplitude u (rad) per rad of heading error
     heading_limit_rad: float  # |u| clip
@@ -129,7 +131,7 @@ class FeedbackConfig:
             if not (0.0 < getattr(self, name) <= 1.0):
                 raise ValueError(f"{name} must be in (0, 1], got {getattr(self, name)}")
         for name in ("gain_scale", "g_limit", "tilt_time_constant_s", "heading_gain", "heading_limit_rad",
-                     "heading_time_constant_s", "reset_min_abs_zeta"):
+                     "heading_time_constant_s", "reset_min_abs_zeta", "reset_min_alpha"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.heading_limit_rad > 0.5:
@@ -393,9 +395,11 @@ class FeedbackController:
             return np.ones(len(CONTROLLED_JOINTS))
         return 1.0 + self._weight * (amplitude_factors(zeta, self.cfg) - 1.0)
 
-    def reset_events(self, zeta: float) -> list[tuple[float, float]]:
+    def reset_events(self, zeta: float, alpha: float = 1.0) -> list[tuple[float, float]]:
         """(target phase of the right Hip2 main oscillator, strength) for the touchdowns of the last
-        ``observe``: the paper's right-foot reset, or ours at either foot."""
+        ``observe``: the paper's right-foot reset, or ours at either foot (not while the applied |ζ| or
+        α is below ``reset_min_abs_zeta`` / ``reset_min_alpha``: its touchdown phases are those of full
+        steps)."""
         left, right = self.touchdowns
         out = []
         w = self._weight
@@ -403,7 +407,8 @@ class FeedbackController:
             return out
         if "reset" in self.pathways and right:
             out.append((self.cfg.reset_phase_rad, w * self.cfg.reset_strength))
-        if "reset_both" in self.pathways and abs(zeta) >= self.cfg.reset_min_abs_zeta:
+        if ("reset_both" in self.pathways and abs(zeta) >= self.cfg.reset_min_abs_zeta
+                and alpha >= self.cfg.reset_min_alpha):
             phi = touchdown_phase(zeta, self.cfg)
             k = w * self.cfg.reset_both_strength
             if right:

@@ -204,7 +204,7 @@ class FeedbackGaitSource(CPGGaitSource):
             ph = phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0])
             self.touchdown_phases.append(ph)
             self.touchdown_log.append((t, z, ph))
-        for target, strength in fb.reset_events(z):
+        for target, strength in fb.reset_events(z, self.ctrl.alpha):
             d = phase_reset(st, self.ctrl.net.omega, target, strength=strength)
             fb.resets.append((t, d))
         self._yaw_u = fb.heading_amplitude()
