@@ -3,14 +3,16 @@
 The learned CPG walks the simulated HOAP-2 through sim_node + pid_node + cpg_node (three processes,
 ``cpg-walker walk``'s experiments/walk_graph.py) while every topic is recorded (recorder_node, one rosbag2
 MCAP). Mid-run, ``DEMO_SCHEDULE`` changes ζ and α (paper eq. 10: frequency ratio, amplitude) through
-cpg_node's SetParameters service: faster, shorter steps, stepping in place, then backwards. A one-line
-status (``GraphStatus``) follows the run from its topics; afterwards the recording is turned into the plots
-(experiments/plot_bag.py), a video (experiments/render.py) and ``summary.json`` (``summarize_recording``).
+cpg_node's SetParameters service: faster, shorter steps, stepping in place, forward again, backwards. A
+one-line status (``GraphStatus``) follows the run from its topics; afterwards the recording is turned into
+the plots (experiments/plot_bag.py), a video (experiments/render.py) and ``summary.json``
+(``summarize_recording``).
 
 The schedule's times are fractions of the walking part of the run (after the recorded opening steps and
 the hand-over to the CPG, ``walk_start_s``), so any ``--duration`` shows every change. The reversal comes
-from forward walking at ζ = α = 1: measured with our feedback, 1.5 -> -1 falls, 1.5 -> 1 -> -1 walks, and
-reversing straight out of stepping in place (ζ 1, α 0 -> ζ -1, α 1) fell 3 s later in a 60 s demo.
+from forward walking at ζ = α = 1, and before the α changes: measured with our feedback (in-process, the
+60 s demo's times), 1.5 -> -1 falls, 1.5 -> 1 -> -1 walks, and reversing 8 s after α came back from 0 to 1
+fell 1.8 s after the reversal (11 s after: walks).
 """
 
 from __future__ import annotations
@@ -29,10 +31,10 @@ from typing import Any
 
 #: (fraction of the walking time, zeta, alpha, what the robot does) - the run starts at zeta = alpha = 1.
 DEMO_SCHEDULE: tuple[tuple[float, float, float, str], ...] = (
-    (0.15, 1.4, 1.0, "faster (zeta 1.4)"),
-    (0.3, 1.0, 0.5, "shorter steps (alpha 0.5)"),
-    (0.45, 1.0, 0.0, "stepping in place (alpha 0)"),
-    (0.6, 1.0, 1.0, "walking forward again (alpha 1)"),
+    (0.12, 1.4, 1.0, "faster (zeta 1.4)"),
+    (0.24, 1.0, 0.5, "shorter steps (alpha 0.5)"),
+    (0.36, 1.0, 0.0, "stepping in place (alpha 0)"),
+    (0.48, 1.0, 1.0, "walking forward again (alpha 1)"),
     (0.75, -1.0, 1.0, "backwards (zeta -1)"),
 )
 FIRST_SEGMENT = "walking forward (zeta 1, alpha 1)"
@@ -244,8 +246,7 @@ def segments(schedule: list[dict] | list[tuple[float, float, float]], end_s: flo
     zeta = alpha = 1 from 0; a change starts at the sim time cpg_node applied it (walk.json's
     ``applied_after_sim_s``), else when it was due."""
     out = [{"from_s": 0.0, "zeta": 1.0, "alpha": 1.0, "label": FIRST_SEGMENT}]
-    labels = {(z, a): label for _, z, a, label in DEMO_SCHEDULE}
-    for item in schedule:
+    for k, item in enumerate(schedule):
         if isinstance(item, dict):
             if not item.get("accepted", True):
                 continue
@@ -253,7 +254,9 @@ def segments(schedule: list[dict] | list[tuple[float, float, float]], end_s: flo
         else:
             t, z, a = item
         if t < end_s:
-            out.append({"from_s": float(t), "zeta": z, "alpha": a, "label": labels.get((z, a), "")})
+            ours = k < len(DEMO_SCHEDULE) and DEMO_SCHEDULE[k][1:3] == (z, a)
+            label = DEMO_SCHEDULE[k][3] if ours else ""
+            out.append({"from_s": float(t), "zeta": z, "alpha": a, "label": label})
     for seg, nxt in zip(out, [*out[1:], None], strict=True):
         seg["to_s"] = float(end_s) if nxt is None else nxt["from_s"]
     return out
