@@ -1,10 +1,10 @@
 """`cpg-walker demo --duration S --out DIR`: the project's main job through the ROS graph (what `make demo`
 runs). The learned CPG walks the simulated HOAP-2 through sim_node + pid_node + cpg_node (three
 processes), zeta and alpha change mid-run through cpg_node's parameter service (faster, shorter steps,
-in place, backwards), a one-line status follows the run, and every topic is recorded; then DIR holds the
-recording (recording.mcap), its plots (*.png), a video (walk.mp4), walk.json and summary.json
-(experiments/demo.py). Ctrl-C stops every node and still writes what was recorded (exit status 130).
---paper adds the in-process Section II experiment and the CPG learning (Fig. 6) first."""
+stopped, forward again, backwards), a one-line status follows the run, and every topic is recorded;
+then DIR holds the recording (recording.mcap), its plots (*.png), a video (walk.mp4), walk.json and
+summary.json (experiments/demo.py). Ctrl-C stops every node and still writes what was recorded (exit
+status 130). --paper adds the in-process Section II experiment and the CPG learning (Fig. 6) first."""
 
 from __future__ import annotations
 

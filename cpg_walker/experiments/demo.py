@@ -3,7 +3,7 @@
 The learned CPG walks the simulated HOAP-2 through sim_node + pid_node + cpg_node (three processes,
 ``cpg-walker walk``'s experiments/walk_graph.py) while every topic is recorded (recorder_node, one rosbag2
 MCAP). Mid-run, ``DEMO_SCHEDULE`` changes ζ and α (paper eq. 10: frequency ratio, amplitude) through
-cpg_node's SetParameters service: faster, shorter steps, stepping in place, forward again, backwards. A
+cpg_node's SetParameters service: faster, shorter steps, stopped (α 0), forward again, backwards. A
 one-line status (``GraphStatus``) follows the run from its topics; afterwards the recording is turned into
 the plots (experiments/plot_bag.py), a video (experiments/render.py) and ``summary.json``
 (``summarize_recording``).
@@ -33,7 +33,7 @@ from typing import Any
 DEMO_SCHEDULE: tuple[tuple[float, float, float, str], ...] = (
     (0.12, 1.4, 1.0, "faster (zeta 1.4)"),
     (0.24, 1.0, 0.5, "shorter steps (alpha 0.5)"),
-    (0.36, 1.0, 0.0, "stepping in place (alpha 0)"),
+    (0.36, 1.0, 0.0, "stopped, standing (alpha 0)"),
     (0.48, 1.0, 1.0, "walking forward again (alpha 1)"),
     (0.75, -1.0, 1.0, "backwards (zeta -1)"),
 )
