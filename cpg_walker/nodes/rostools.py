@@ -1,5 +1,6 @@
 """``ros2 param`` / ``ros2 topic``-like tools for a pip-only install (no ros2cli): the core of
-``cpg-walker param`` and ``cpg-walker topic``.
+``cpg-walker param`` and ``cpg-walker topic`` (node listing/info and topic info: rostools_graph.py;
+``topic pub``: rostools_pub.py).
 
 Everything goes through the real ROS graph: the nodes' parameter services (rcl_interfaces
 ListParameters / GetParameters / SetParameters) and subscriptions to the topics, with the message types
@@ -31,17 +32,20 @@ def domain_id() -> int:
 
 
 class Session:
-    """One rclpy context + node on the environment's domain; a context manager."""
+    """One rclpy context + node on the environment's domain; a context manager. The node is hidden (its
+    name starts with ``_``, like ros2cli's own ``_ros2cli_*`` nodes) unless ``hidden`` is False: `node
+    list` does not show the tools themselves."""
 
-    def __init__(self, name: str = "cpg_walker_tool"):
+    def __init__(self, name: str = "cpg_walker_tool", hidden: bool = True, pid_suffix: bool = True):
         import rclpy
         from rclpy.signals import SignalHandlerOptions
 
         self.domain = domain_id()
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx, domain_id=self.domain, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node(f"{name}_{os.getpid()}", context=self.ctx,
-                                      start_parameter_services=False)
+        full = (f"{name}_{os.getpid()}" if pid_suffix else name).lstrip("_")
+        self.node = rclpy.create_node(f"_{full}" if hidden else full, context=self.ctx,
+                                      start_parameter_services=False, enable_rosout=False)
         from rclpy.executors import SingleThreadedExecutor
 
         self.executor = SingleThreadedExecutor(context=self.ctx)
@@ -56,6 +60,22 @@ class Session:
             left = 0.1 if end is None else max(0.0, min(0.1, end - time.monotonic()))
             self.executor.spin_once(timeout_sec=left)
         return True
+
+    def settled(self, snapshot: Callable[[], Any], ready: Callable[[Any], bool] = bool, settle: float = 0.5,
+                timeout: float = 3.0) -> Any:
+        """The graph as ``snapshot()`` sees it once it is ``ready`` and unchanged for ``settle`` wall
+        seconds (discovery goes one endpoint at a time), or as it is after ``timeout``."""
+        end = time.monotonic() + timeout
+        last = snapshot()
+        stable_since = time.monotonic()
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.05)
+            now = snapshot()
+            if now != last:
+                last, stable_since = now, time.monotonic()
+            elif ready(now) and time.monotonic() - stable_since >= settle:
+                break
+        return last
 
     def call(self, srv_type: Any, name: str, request: Any, timeout: float, what: str) -> Any:
         """Call service ``name``; ToolError ``what`` not found / no answer within ``timeout``."""
@@ -191,6 +211,61 @@ def set_parameter(s: Session, node: str, name: str, text: str, timeout: float = 
     return bool(result.successful), result.reason
 
 
+def describe_parameters(s: Session, node: str, names: list[str], timeout: float = 10.0) -> list[Any]:
+    """The ParameterDescriptors of ``names`` of ``node`` (ToolError naming an undeclared one)."""
+    from rcl_interfaces.srv import DescribeParameters
+
+    node = node_name(node)
+    res = s.call(DescribeParameters, f"{node}/describe_parameters", DescribeParameters.Request(names=names),
+                 timeout, f"node {node}")
+    if len(res.descriptors) != len(names):  # rclpy answers none at all when one name is not declared
+        declared = set(list_parameters(s, node, timeout))
+        missing = [n for n in names if n not in declared] or names
+        raise ToolError(f"{node} has no parameter {', '.join(missing)} (not declared)")
+    return list(res.descriptors)
+
+
+DESCRIPTOR_TYPE_NAMES = {0: "not set", 1: "boolean", 2: "integer", 3: "double", 4: "string",
+                         5: "byte array", 6: "boolean array", 7: "integer array", 8: "double array",
+                         9: "string array"}
+
+
+def format_descriptor(d: Any) -> str:
+    """``ros2 param describe``'s block for one ParameterDescriptor."""
+    lines = [f"Parameter name: {d.name}", f"  Type: {DESCRIPTOR_TYPE_NAMES.get(d.type, 'unknown')}"]
+    if d.description:
+        lines.append(f"  Description: {d.description}")
+    lines.append("  Constraints:")
+    if d.read_only:
+        lines.append("    Read only: true")
+    ranges = list(d.floating_point_range) + list(d.integer_range)
+    if ranges:
+        r = ranges[0]
+        lines += [f"    Min value: {r.from_value}", f"    Max value: {r.to_value}"]
+        if r.step:
+            lines.append(f"    Step: {r.step}")
+    if d.additional_constraints:
+        lines.append(f"    Additional constraints: {d.additional_constraints}")
+    return "\n".join(lines)
+
+
+def dump_parameters(s: Session, node: str, timeout: float = 10.0) -> str:
+    """``ros2 param dump``'s YAML: ``/node: {ros__parameters: ...}``, dotted names nested, keys sorted."""
+    import yaml
+
+    node = node_name(node)
+    names = list_parameters(s, node, timeout)
+    values = get_parameters(s, node, names, timeout) if names else []
+    params: dict[str, Any] = {}
+    for name, value in zip(names, values, strict=True):
+        *groups, leaf = name.split(".")
+        d = params
+        for g in groups:
+            d = d.setdefault(g, {})
+        d[leaf] = from_parameter_value(value)
+    return yaml.dump({node: {"ros__parameters": params}}, default_flow_style=False)
+
+
 def describe_value(v: Any) -> str:
     """``ros2 param get``'s wording: ``Double value is: 0.8``."""
     if v.type == 0:
@@ -201,9 +276,12 @@ def describe_value(v: Any) -> str:
 # ----------------------------------------------------------------------------------------------- topics
 
 def message_class(type_name: str) -> type:
-    """``sensor_msgs/msg/JointState`` -> the generated Python class."""
+    """``sensor_msgs/msg/JointState`` (or ``sensor_msgs/JointState``, as ros2 accepts) -> the generated
+    Python class."""
     parts = type_name.split("/")
-    if len(parts) != 3:
+    if len(parts) == 2:
+        parts.insert(1, "msg")
+    if len(parts) != 3 or parts[1] != "msg" or not all(parts):
         raise ValueError(f"not a message type: {type_name!r} (expected pkg/msg/Type)")
     try:
         return getattr(importlib.import_module(f"{parts[0]}.{parts[1]}"), parts[2])
@@ -214,17 +292,8 @@ def message_class(type_name: str) -> type:
 def topic_types(s: Session, settle: float = 0.5, timeout: float = 3.0) -> dict[str, list[str]]:
     """Topic -> types as discovered from the graph: waits until the list is unchanged for ``settle``
     seconds (at most ``timeout``), since discovery takes a moment."""
-    end = time.monotonic() + timeout
-    last: dict[str, list[str]] = {}
-    stable_since = time.monotonic()
-    while time.monotonic() < end:
-        s.executor.spin_once(timeout_sec=0.05)
-        now = {name: list(types) for name, types in s.node.get_topic_names_and_types()}
-        if now != last:
-            last, stable_since = now, time.monotonic()
-        elif now and time.monotonic() - stable_since >= settle and _others_seen(s):
-            break
-    return last
+    return s.settled(lambda: {name: list(types) for name, types in s.node.get_topic_names_and_types()},
+                     lambda now: bool(now) and _others_seen(s), settle, timeout)
 
 
 def _others_seen(s: Session) -> bool:
