@@ -14,8 +14,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     q = ps.add_parser("list", help="fully qualified node names, sorted")
     q.add_argument("-a", "--all", action="store_true", help="hidden nodes (names starting with _) as well")
     q.add_argument("-c", "--count-nodes", action="store_true", help="only the number of nodes")
-    q.add_argument("--wait", type=float, default=3.0, metavar="S",
-                   help="at most S seconds of discovery (default 3)")
+    q.add_argument("--wait", type=float, default=5.0, metavar="S",
+                   help="at most S seconds of discovery (default 5)")
     q.set_defaults(func=_list)
     q = ps.add_parser("info", help="a node's subscribers, publishers, services and actions")
     q.add_argument("node", metavar="NODE", help="node name, e.g. /cpg")

@@ -35,10 +35,27 @@ def node_names(s: Session, include_hidden: bool = False) -> list[str]:
         HIDDEN_PREFIX)))
 
 
-def list_nodes(s: Session, include_hidden: bool = False, settle: float = 0.5, timeout: float = 3.0
+#: Wall s a listing must stay unchanged to be taken as complete: a node process announces its name a moment
+#: after its DDS participant is found (~1.7 s after a tool starts on an idle machine), nodes one by one.
+SETTLE_S = 1.0
+
+
+def list_nodes(s: Session, include_hidden: bool = False, settle: float = SETTLE_S, timeout: float = 5.0
                ) -> list[str]:
-    """``ros2 node list``: the node names once discovery has settled (at most ``timeout`` wall s)."""
+    """``ros2 node list``: the node names once discovery has settled (at most ``timeout`` wall s). With no
+    ros2 daemon holding the graph, a node found later than that is missed: list again."""
     return s.settled(lambda: node_names(s, include_hidden), bool, settle, timeout)
+
+
+def endpoints_seen(s: Session) -> bool:
+    """Whether some other node is known and each known node's endpoints have been discovered too (every
+    rclpy node publishes at least /parameter_events): node names and endpoints arrive separately."""
+    others = [n for n in s.node.get_node_names_and_namespaces()
+              if (n[0], n[1]) != (s.node.get_name(), s.node.get_namespace())]
+    try:
+        return bool(others) and all(s.node.get_publisher_names_and_types_by_node(*n) for n in others)
+    except Exception:  # a node that left between the two calls (rclpy's NodeNameNonExistentError)
+        return False
 
 
 SECTIONS = ("Subscribers", "Publishers", "Service Servers", "Service Clients", "Action Servers",
@@ -67,7 +84,7 @@ def node_endpoints(s: Session, node: str, include_hidden: bool = False) -> Endpo
 
 
 def node_info(s: Session, node: str, include_hidden: bool = False, timeout: float = 10.0,
-              settle: float = 1.0) -> tuple[Endpoints, int]:
+              settle: float = SETTLE_S) -> tuple[Endpoints, int]:
     """``ros2 node info``: the sections of ``node`` once discovered and settled, and how many nodes
     share its name (ToolError when it does not show up within ``timeout`` wall s)."""
     node = node_name(node)
@@ -104,7 +121,7 @@ def nonunique_warning(node: str, count: int) -> str:
             "information about only one of them.")
 
 
-def topic_info(s: Session, topic: str, timeout: float = 10.0, settle: float = 1.0
+def topic_info(s: Session, topic: str, timeout: float = 10.0, settle: float = SETTLE_S
                ) -> tuple[list[str], list[Any], list[Any]]:
     """``ros2 topic info``: (types, publishers' and subscriptions' TopicEndpointInfo) of ``topic`` once
     discovered and settled, this tool's own endpoints left out (ToolError when the topic does not show
@@ -125,9 +142,9 @@ def topic_info(s: Session, topic: str, timeout: float = 10.0, settle: float = 1.
 
     def keyed() -> Any:
         snap = snapshot()
-        return None if snap is None else snap[0]
+        return None if snap is None else (snap[0], tuple(node_names(s, True)))
 
-    s.settled(keyed, lambda k: k is not None, settle, timeout)
+    s.settled(keyed, lambda k: k is not None and endpoints_seen(s), settle, timeout)
     snap = snapshot()
     if snap is None:
         raise ToolError(f"Unknown topic '{topic}' in domain {s.domain} (not seen within {timeout:g} s)")

@@ -1,0 +1,184 @@
+"""`cpg-walker node list|info`, `param describe|dump`, `topic info|pub`: ros2cli's verbs and output formats
+without ros2cli, run as real subprocesses against a real node (pid_node) and the test's probe node on the
+test's own DDS domain. Discovery is per process (no ros2 daemon): a listing is repeated until it shows
+what the probe already sees, within a deadline that only guards against hangs."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import pytest
+from ros_helpers import ANSWER_S, START_S
+from test_ros_cli import DISCOVERY, cli
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def until(ok, *args: str) -> object:
+    """Run the CLI with ``args`` until ``ok(result)`` or ANSWER_S wall s have passed; the last result."""
+    end = time.monotonic() + ANSWER_S
+    while True:
+        r = cli(*args)
+        if ok(r) or time.monotonic() > end:
+            return r
+
+
+def sections(text: str) -> dict[str, list[str]]:
+    """`node info`'s text -> section -> its ``name: type`` lines (checking the layout on the way)."""
+    lines = text.split("\n")
+    out: dict[str, list[str]] = {}
+    current = None
+    for line in lines[1:]:
+        if re.fullmatch(r"  [A-Z][A-Za-z ]+:", line):
+            current = line.strip()[:-1]
+            out[current] = []
+        elif line.startswith("    "):
+            assert current is not None and re.fullmatch(r"    /\S+: \S+/\S+/\S+", line), line
+            out[current].append(line.strip())
+        else:
+            assert line == "", f"unexpected line {line!r} in:\n{text}"  # an empty section, as ros2 prints
+    return out
+
+
+def test_node_param_and_topic_info_against_a_running_node(graph, probe, tmp_path):
+    import yaml
+    from rcl_interfaces.srv import ListParameters
+    from rclpy.parameter import parameter_dict_from_yaml_file
+    from sensor_msgs.msg import JointState
+
+    from cpg_walker.nodes.pid_node import GAIN_RANGES
+    from cpg_walker.nodes.rostools import from_parameter_value
+
+    graph.start("pid_node")
+    probe.listen("/joint_torques", JointState)
+    probe.wait_endpoints("/joint_torques", 1, 1)  # pid's publisher, the probe's subscription
+    probe.wait(lambda: probe.node.count_subscribers("/joint_targets") >= 1, "pid subscribed", START_S)
+
+    # node list: fully qualified, sorted, this tool's own node hidden
+    listed = until(lambda r: {"/pid", "/probe"} <= set(r.stdout.split()), "node", "list")
+    assert listed.returncode == 0, listed.stderr
+    names = listed.stdout.splitlines()
+    assert {"/pid", "/probe"} <= set(names) and names == sorted(names), listed.stdout
+    assert not [n for n in names if n.rsplit("/", 1)[1].startswith("_")], names
+    counted = until(lambda r: r.stdout.strip().isdigit() and int(r.stdout) >= 2, "node", "list", "-c")
+    assert int(counted.stdout) >= 2, counted
+
+    # node info: ros2's six sections in order, "name: type" lines at 4 spaces
+    want_subs = {"/clock: rosgraph_msgs/msg/Clock", "/joint_states: sensor_msgs/msg/JointState",
+                 "/joint_targets: sensor_msgs/msg/JointState",
+                 "/joint_trajectory: trajectory_msgs/msg/JointTrajectory"}  # not lockstep: the horizon too
+    info = until(lambda r: want_subs <= {x.strip() for x in r.stdout.splitlines()}, "node", "info", "/pid",
+                 *DISCOVERY)
+    assert info.returncode == 0, info.stderr
+    assert info.stdout.startswith("/pid\n  Subscribers:\n"), info.stdout
+    sec = sections(info.stdout)
+    assert list(sec) == ["Subscribers", "Publishers", "Service Servers", "Service Clients", "Action Servers",
+                         "Action Clients"], info.stdout
+    assert set(sec["Subscribers"]) == want_subs, info.stdout
+    assert {"/joint_torques: sensor_msgs/msg/JointState", "/rosout: rcl_interfaces/msg/Log",
+            "/parameter_events: rcl_interfaces/msg/ParameterEvent"} <= set(sec["Publishers"]), info.stdout
+    assert {"/pid/get_parameters: rcl_interfaces/srv/GetParameters",
+            "/pid/set_parameters: rcl_interfaces/srv/SetParameters",
+            "/pid/describe_parameters: rcl_interfaces/srv/DescribeParameters"} <= set(sec["Service Servers"])
+    assert sec["Service Clients"] == sec["Action Servers"] == sec["Action Clients"] == [], info.stdout
+    missing = cli("node", "info", "/nonexistent", "--timeout", "2")
+    assert missing.returncode == 1 and "Unable to find node '/nonexistent'" in missing.stderr, missing
+
+    # param describe: the declared descriptors in ros2's block
+    described = cli("param", "describe", "/pid", "kp.leg", "realtime_priority", "lockstep", *DISCOVERY)
+    assert described.returncode == 0, described.stderr
+    blocks = described.stdout.split("Parameter name: ")[1:]
+    assert blocks[0] == ("kp.leg\n  Type: double\n  Description: kp of the leg joint(s)\n  Constraints:\n"
+                         f"    Min value: 0.0\n    Max value: {GAIN_RANGES['kp']}\n"), described.stdout
+    assert blocks[1].startswith("realtime_priority\n  Type: integer\n  Description: SCHED_FIFO priority")
+    assert blocks[1].endswith("  Constraints:\n    Read only: true\n    Min value: 0\n    Max value: 99\n"
+                              "    Step: 1\n"), blocks[1]
+    assert blocks[2].startswith("lockstep\n  Type: boolean\n") and blocks[2].endswith(
+        "  Constraints:\n    Read only: true\n"), blocks[2]
+    undeclared = cli("param", "describe", "/pid", "kp.leg", "no_such_gain", *DISCOVERY)
+    assert undeclared.returncode == 1 and "no parameter no_such_gain" in undeclared.stderr, undeclared
+
+    # param dump: ros__parameters YAML of every parameter, nested at the dots, equal to the node's values
+    dumped = cli("param", "dump", "/pid", *DISCOVERY)
+    assert dumped.returncode == 0, dumped.stderr
+    assert dumped.stdout.startswith("/pid:\n  ros__parameters:\n"), dumped.stdout[:200]
+    data = yaml.safe_load(dumped.stdout)
+    assert list(data) == ["/pid"] and list(data["/pid"]) == ["ros__parameters"]
+    assert isinstance(data["/pid"]["ros__parameters"]["kp"], dict)  # kp.leg ... nested under kp
+    path = tmp_path / "pid_dump.yaml"
+    path.write_text(dumped.stdout)
+    loaded = parameter_dict_from_yaml_file(str(path))  # rclpy's own params-file reader
+    listed_names = probe.call(ListParameters, "/pid/list_parameters").result.names
+    assert sorted(loaded) == sorted(listed_names) and "kp.leg" in loaded, (sorted(loaded), listed_names)
+    actual = probe.get_params("pid", sorted(loaded))
+    for name, value in zip(sorted(loaded), actual, strict=True):
+        assert from_parameter_value(loaded[name].value) == from_parameter_value(value), name
+
+    # topic info: counts, then -v's endpoint blocks (rclpy's TopicEndpointInfo text)
+    want = "Type: sensor_msgs/msg/JointState\nPublisher count: 1\nSubscription count: 1\n"
+    plain = until(lambda r: r.stdout == want, "topic", "info", "/joint_torques", *DISCOVERY)
+    assert plain.returncode == 0 and plain.stdout == want, plain
+    verbose = until(lambda r: "\n\nPublisher count: 1\n\n" in r.stdout and "\n\nSubscription count: 1\n\n"
+                    in r.stdout, "topic", "info", "-v", "/joint_torques", *DISCOVERY)
+    assert verbose.returncode == 0, verbose.stderr
+    parts = verbose.stdout.split("\n\n")
+    assert parts[0] == "Type: sensor_msgs/msg/JointState" and parts[1] == "Publisher count: 1", parts
+    assert parts[3] == "Subscription count: 1" and parts[5] == "", parts
+    pub, sub = parts[2].split("\n"), parts[4].split("\n")
+    assert pub[:3] == ["Node name: pid", "Node namespace: /", "Topic type: sensor_msgs/msg/JointState"], pub
+    assert "Endpoint type: PUBLISHER" in pub and "QoS profile:" in pub, pub
+    assert re.fullmatch(r"GID: [0-9a-f]{2}(\.[0-9a-f]{2})+", next(x for x in pub if x.startswith("GID"))), pub
+    assert {"  Reliability: RELIABLE", "  Durability: VOLATILE"} <= set(pub), pub
+    assert sub[0] == "Node name: probe" and "Endpoint type: SUBSCRIPTION" in sub, sub
+    unknown = cli("topic", "info", "/no_such_topic", "--timeout", "2")
+    assert unknown.returncode == 1 and "Unknown topic '/no_such_topic'" in unknown.stderr, unknown
+
+
+def test_topic_pub_delivers_the_exact_message_and_refuses_bad_fields(probe):
+    from geometry_msgs.msg import Twist, Vector3
+    from sensor_msgs.msg import JointState
+
+    probe.listen("/cmd_vel", Twist)
+    probe.listen("/pub_states", JointState)
+    got = probe.received["/cmd_vel"]
+    keep = ("--keep-alive", "1")  # wall s for a reliable resend should the probe match late
+
+    once = cli("topic", "pub", "/cmd_vel", "geometry_msgs/msg/Twist",
+               "{linear: {x: 0.1}, angular: {z: -0.2}}", "-1", *keep)
+    assert once.returncode == 0, once.stderr
+    waited = "Waiting for at least 1 matching subscription(s)...\n"  # -1 waits for one by default
+    shown = ("publishing #1: geometry_msgs.msg.Twist(linear=geometry_msgs.msg.Vector3(x=0.1, y=0.0, z=0.0), "
+             "angular=geometry_msgs.msg.Vector3(x=0.0, y=0.0, z=-0.2))")  # the message's repr, as ros2
+    assert once.stdout.replace(waited, "") == f"publisher: beginning loop\n{shown}\n\n", once.stdout
+    probe.wait(lambda: len(got) >= 1, "the -1 message")
+    probe.spin_for(0.5)
+    assert [m for _, m in got] == [Twist(linear=Vector3(x=0.1), angular=Vector3(z=-0.2))]
+
+    times = cli("topic", "pub", "/cmd_vel", "geometry_msgs/Twist", "{angular: {z: 0.3}}", "-t", "3",
+                "-r", "20", "-p", "2", *keep)
+    assert times.returncode == 0, times.stderr
+    assert re.findall(r"publishing #(\d+)", times.stdout) == ["2"], times.stdout  # -p 2: every 2nd shown
+    probe.wait(lambda: len(got) >= 4, "the -t 3 messages")
+    probe.spin_for(0.5)
+    assert [m for _, m in got[1:]] == [Twist(angular=Vector3(z=0.3))] * 3
+
+    states = cli("topic", "pub", "/pub_states", "sensor_msgs/msg/JointState",
+                 "{header: auto, name: [a, b], position: [1, 2.5]}", "-1", *keep)
+    assert states.returncode == 0, states.stderr
+    probe.wait(lambda: probe.received["/pub_states"], "the JointState")
+    js = probe.received["/pub_states"][0][1]
+    assert list(js.name) == ["a", "b"] and list(js.position) == [1.0, 2.5], js
+    assert js.header.stamp.sec > 0  # 'auto': stamped at publication
+
+    for values, error in (("{linar: {x: 0.1}}", "no field 'linar' in geometry_msgs/msg/Twist"),
+                          ("{linear: {x: fast}}", "field 'linear.x' is a double, got 'fast'"),
+                          ("{linear: 3}", "field 'linear' is a geometry_msgs/msg/Vector3"),
+                          ("[1, 2]", "the values need to be a dictionary")):
+        bad = cli("topic", "pub", "/cmd_vel", "geometry_msgs/msg/Twist", values, "-1")
+        assert bad.returncode == 2 and error in bad.stderr, (values, bad)
+        assert "publisher: beginning loop" not in bad.stdout, bad
+    wrong_type = cli("topic", "pub", "/cmd_vel", "geometry_msgs/msg/Twst", "{}", "-1")
+    assert wrong_type.returncode == 2 and "geometry_msgs/msg/Twst" in wrong_type.stderr, wrong_type
+    probe.spin_for(0.5)
+    assert len(got) == 4  # nothing published by the refused ones
