@@ -12,8 +12,6 @@ import pytest
 from ros_helpers import ANSWER_S, START_S
 from test_ros_cli import DISCOVERY, cli
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
-
 
 def until(ok, *args: str) -> object:
     """Run the CLI with ``args`` until ``ok(result)`` or ANSWER_S wall s have passed; the last result."""
@@ -41,6 +39,24 @@ def sections(text: str) -> dict[str, list[str]]:
     return out
 
 
+def test_dump_yaml_reads_back_through_rclpy_even_where_a_name_prefixes_another(tmp_path):
+    """cpg_node has ``feedback`` and ``feedback.<gain>``: no nesting below a name that is a parameter."""
+    from rclpy.parameter import parameter_dict_from_yaml_file
+
+    from cpg_walker.nodes.rostools import from_parameter_value, parameters_yaml
+
+    values = {"feedback": True, "feedback.gain": 0.5, "feedback.sub.n": 3, "kp.leg": 100.0, "kp.arm": 30.0,
+              "zeta": 0.8, "names": ["a", "b"], "gains": [1.0, 2.5]}
+    text = parameters_yaml("cpg", values)
+    assert text.startswith("/cpg:\n  ros__parameters:\n") and "    kp:\n      arm: 30.0\n" in text, text
+    path = tmp_path / "dump.yaml"
+    path.write_text(text)
+    loaded = parameter_dict_from_yaml_file(str(path))
+    assert {k: from_parameter_value(p.value) for k, p in loaded.items()} == values
+
+
+@pytest.mark.ros
+@pytest.mark.slow
 def test_node_param_and_topic_info_against_a_running_node(graph, probe, tmp_path):
     import yaml
     from rcl_interfaces.srv import ListParameters
@@ -135,6 +151,8 @@ def test_node_param_and_topic_info_against_a_running_node(graph, probe, tmp_path
     assert unknown.returncode == 1 and "Unknown topic '/no_such_topic'" in unknown.stderr, unknown
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_topic_pub_delivers_the_exact_message_and_refuses_bad_fields(probe):
     from geometry_msgs.msg import Twist, Vector3
     from sensor_msgs.msg import JointState

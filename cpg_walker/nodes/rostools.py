@@ -251,19 +251,28 @@ def format_descriptor(d: Any) -> str:
 
 def dump_parameters(s: Session, node: str, timeout: float = 10.0) -> str:
     """``ros2 param dump``'s YAML: ``/node: {ros__parameters: ...}``, dotted names nested, keys sorted."""
-    import yaml
 
     node = node_name(node)
     names = list_parameters(s, node, timeout)
     values = get_parameters(s, node, names, timeout) if names else []
+    return parameters_yaml(node, {n: from_parameter_value(v) for n, v in zip(names, values, strict=True)})
+
+
+def parameters_yaml(node: str, values: dict[str, Any]) -> str:
+    """A params file of ``values`` (name -> value) for ``node``: nested at the dots as ros2 writes it,
+    except below a name that is itself a parameter (``feedback`` and ``feedback.gain``: ros2's dump fails
+    there), where the rest of the name is kept as one dotted key, which ROS reads back the same."""
+    import yaml
+
     params: dict[str, Any] = {}
-    for name, value in zip(names, values, strict=True):
-        *groups, leaf = name.split(".")
+    for name in sorted(values):
+        parts = name.split(".")
+        cut = next((i for i in range(1, len(parts)) if ".".join(parts[:i]) in values), len(parts))
         d = params
-        for g in groups:
+        for g in parts[:cut - 1] if cut < len(parts) else parts[:-1]:
             d = d.setdefault(g, {})
-        d[leaf] = from_parameter_value(value)
-    return yaml.dump({node: {"ros__parameters": params}}, default_flow_style=False)
+        d[".".join(parts[cut - 1:]) if cut < len(parts) else parts[-1]] = values[name]
+    return yaml.dump({node_name(node): {"ros__parameters": params}}, default_flow_style=False)
 
 
 def describe_value(v: Any) -> str:
