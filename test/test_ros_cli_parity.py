@@ -98,7 +98,7 @@ def test_node_param_and_topic_info_against_a_running_node(graph, probe, tmp_path
             "/pid/set_parameters: rcl_interfaces/srv/SetParameters",
             "/pid/describe_parameters: rcl_interfaces/srv/DescribeParameters"} <= set(sec["Service Servers"])
     assert sec["Service Clients"] == sec["Action Servers"] == sec["Action Clients"] == [], info.stdout
-    missing = cli("node", "info", "/nonexistent", "--timeout", "2")
+    missing = cli("node", "info", "/nonexistent", "--timeout", "1")
     assert missing.returncode == 1 and "Unable to find node '/nonexistent'" in missing.stderr, missing
 
     # param describe: the declared descriptors in ros2's block
@@ -147,7 +147,7 @@ def test_node_param_and_topic_info_against_a_running_node(graph, probe, tmp_path
     assert re.fullmatch(r"GID: [0-9a-f]{2}(\.[0-9a-f]{2})+", next(x for x in pub if x.startswith("GID"))), pub
     assert {"  Reliability: RELIABLE", "  Durability: VOLATILE"} <= set(pub), pub
     assert sub[0] == "Node name: probe" and "Endpoint type: SUBSCRIPTION" in sub, sub
-    unknown = cli("topic", "info", "/no_such_topic", "--timeout", "2")
+    unknown = cli("topic", "info", "/no_such_topic", "--timeout", "1")
     assert unknown.returncode == 1 and "Unknown topic '/no_such_topic'" in unknown.stderr, unknown
 
 

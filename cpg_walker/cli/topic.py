@@ -178,8 +178,16 @@ def _pub(args: argparse.Namespace) -> int:
     qos = rp.qos_profile(args.qos_profile, args.qos_reliability, args.qos_durability, args.qos_depth,
                          args.qos_history)
     cls, msg, stamps = rp.build_message(args.message_type, sys.stdin.read() if args.stdin else args.values)
-    session = (rt.Session("cpg_walker_pub") if args.node_name is None
-               else rt.Session(args.node_name, hidden=False, pid_suffix=False))
+    if args.node_name is None:
+        session = rt.Session("cpg_walker_pub")
+    else:
+        from rclpy.exceptions import InvalidNodeNameException
+
+        try:
+            session = rt.Session(args.node_name, hidden=False, pid_suffix=False)
+        except InvalidNodeNameException as exc:
+            raise ValueError(f"--node-name {args.node_name!r} is not a valid node name "
+                             f"({str(exc).splitlines()[0]})") from None
     try:
         with session as s:
             rp.publish(s, args.topic, cls, msg, stamps, period=1.0 / args.rate, print_nth=args.print,
