@@ -55,6 +55,41 @@ def test_dump_yaml_reads_back_through_rclpy_even_where_a_name_prefixes_another(t
     assert {k: from_parameter_value(p.value) for k, p in loaded.items()} == values
 
 
+def test_pub_values_fill_nested_messages_and_refuse_what_does_not_fit():
+    """`topic pub`'s VALUES: nested dicts, lists of messages, ints for floats; a bad one names its field."""
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import Point
+
+    from cpg_walker.nodes.rostools_pub import build_message, qos_profile
+
+    _, traj, stamps = build_message("trajectory_msgs/JointTrajectory",
+                                    "{header: auto, joint_names: [a], points: [{positions: [1], "
+                                    "time_from_start: {sec: 2}}, {positions: [0.5]}]}")
+    assert list(traj.joint_names) == ["a"] and [list(p.positions) for p in traj.points] == [[1.0], [0.5]]
+    assert traj.points[0].time_from_start.sec == 2 and len(stamps) == 1
+    stamps[0](Time(sec=7))  # 'auto': the publish loop stamps the header of each message
+    assert traj.header.stamp.sec == 7
+    _, marker, _ = build_message("visualization_msgs/msg/Marker", "{points: [{x: 1}, {y: 2.5}], id: 3}")
+    assert list(marker.points) == [Point(x=1.0), Point(y=2.5)] and marker.id == 3
+    for type_name, values, error in (
+            ("std_msgs/msg/Float64", "{data: true}", "field 'data' is a double, got True"),
+            ("std_msgs/msg/Int32", "{data: 1.5}", "field 'data' is a int32, got 1.5"),
+            ("std_msgs/msg/UInt8", "{data: 300}", "field 'data' is a uint8: 300 is outside [0, 255]"),
+            ("sensor_msgs/msg/Imu", "{orientation_covariance: [1, 2]}",
+             "field 'orientation_covariance' is a double[9]: exactly 9 items, got 2"),
+            ("sensor_msgs/msg/JointState", "{position: [1, x]}", "field 'position[1]' is a double, got 'x'"),
+            ("trajectory_msgs/msg/JointTrajectory", "{points: [{positons: [1]}]}",
+             "no field 'points[0].positons' in trajectory_msgs/msg/JointTrajectoryPoint"),
+            ("std_msgs/msg/Bool", "data: [", "the values are not YAML"),
+            ("std_msgs/Strin", "{}", "std_msgs/Strin"),
+            ("not_a_type", "{}", "not a message type")):
+        with pytest.raises(ValueError, match=re.escape(error)):
+            build_message(type_name, values)
+    assert qos_profile("sensor_data", reliability="reliable", depth=3).depth == 3
+    with pytest.raises(ValueError, match=r"--qos-durability 'latched' is not one of: .*transient_local"):
+        qos_profile(durability="latched")
+
+
 @pytest.mark.ros
 @pytest.mark.slow
 def test_node_param_and_topic_info_against_a_running_node(graph, probe, tmp_path):

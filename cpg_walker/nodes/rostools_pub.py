@@ -13,18 +13,31 @@ from typing import Any
 from cpg_walker.nodes.rostools import Session, ToolError, message_class, node_name
 
 FLOAT_TYPES = {"float", "double", "float32", "float64", "long double"}
-INT_TYPES = {"int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "char", "byte",
-             "octet"}
+#: Integer field types -> their range (rclpy's generated setters check nothing unless asked to).
+INT_RANGES = {f"{u}int{n}": ((0, 2**n - 1) if u else (-2**(n - 1), 2**(n - 1) - 1))
+              for u in ("", "u") for n in (8, 16, 32, 64)} | {"char": (0, 255)}
+BYTE_TYPES = {"byte", "octet"}  # a bytes object of length 1 in Python
 STAMP_NOW = "now"  # a builtin_interfaces/Time field's value: the time of each publication (as ros2)
 HEADER_AUTO = "auto"  # a std_msgs/Header field's value: a header stamped at each publication (as ros2)
 
 
-def _element(type_str: str) -> tuple[str, bool]:
-    """``sequence<double, 3>`` / ``double[3]`` -> (``double``, True); ``double`` -> (``double``, False)."""
+def _element(type_str: str) -> tuple[str, bool, int | None, bool]:
+    """(element type, is an array, its size or bound, the size is exact): ``sequence<double, 3>`` ->
+    (``double``, True, 3, False); ``double[3]`` -> (``double``, True, 3, True); ``double`` -> (``double``,
+    False, None, False)."""
     if type_str.startswith("sequence<"):
-        return type_str[len("sequence<"):-1].split(",")[0].strip(), True
-    m = re.fullmatch(r"(.+)\[\d*\]", type_str)
-    return (m.group(1), True) if m else (type_str, False)
+        inner = type_str[len("sequence<"):-1].rsplit(",", 1)
+        bounded = len(inner) == 2 and inner[1].strip().isdigit()
+        return (inner[0] if bounded else type_str[len("sequence<"):-1]).strip(), True, (
+            int(inner[1]) if bounded else None), False
+    m = re.fullmatch(r"(.+)\[(\d+)\]", type_str)
+    return (m.group(1), True, int(m.group(2)), True) if m else (type_str, False, None, False)
+
+
+def _check_size(value: list, type_str: str, size: int | None, exact: bool, where: str) -> None:
+    if size is not None and (len(value) != size if exact else len(value) > size):
+        raise ValueError(f"field {where!r} is a {type_str}: {'exactly' if exact else 'at most'} {size} "
+                         f"items, got {len(value)}")
 
 
 def _scalar(value: Any, base: str, where: str) -> Any:
@@ -34,10 +47,13 @@ def _scalar(value: Any, base: str, where: str) -> Any:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise bad
         return float(value)
-    if base in INT_TYPES:
+    if base in INT_RANGES or base in BYTE_TYPES:
+        lo, hi = INT_RANGES.get(base, (0, 255))
         if isinstance(value, bool) or not isinstance(value, int):
             raise bad
-        return value
+        if not lo <= value <= hi:
+            raise ValueError(f"field {where!r} is a {base}: {value} is outside [{lo}, {hi}]")
+        return bytes([value]) if base in BYTE_TYPES else value
     if base == "boolean":
         if not isinstance(value, bool):
             raise bad
@@ -45,7 +61,11 @@ def _scalar(value: Any, base: str, where: str) -> Any:
     if base.startswith(("string", "wstring")):
         if isinstance(value, dict | list):
             raise bad
-        return value if isinstance(value, str) else str(value)  # data: 5 -> '5', as ros2
+        text = value if isinstance(value, str) else str(value)  # data: 5 -> '5', as ros2
+        bound = re.fullmatch(r"w?string<=(\d+)", base)
+        if bound and len(text) > int(bound.group(1)):
+            raise ValueError(f"field {where!r} is a {base}: {len(text)} characters")
+        return text
     return value
 
 
@@ -66,11 +86,13 @@ def fill_message(msg: Any, values: Any, stamps: list[Callable[[Any], None]] | No
         where = prefix + str(key)
         if key not in fields:
             raise ValueError(f"no field {where!r} in {kind} (its fields: {', '.join(fields) or 'none'})")
-        base, is_array = _element(fields[key])
+        base, is_array, size, exact = _element(fields[key])
+        if is_array and not isinstance(value, list):
+            raise ValueError(f"field {where!r} is a {fields[key]}, got {value!r} (give a list)")
+        if is_array:
+            _check_size(value, fields[key], size, exact, where)
         if "/" not in base:  # primitive
             if is_array:
-                if not isinstance(value, list):
-                    raise ValueError(f"field {where!r} is a {fields[key]}, got {value!r} (give a list)")
                 value = [_scalar(v, base, f"{where}[{i}]") for i, v in enumerate(value)]
             else:
                 value = _scalar(value, base, where)
@@ -80,8 +102,6 @@ def fill_message(msg: Any, values: Any, stamps: list[Callable[[Any], None]] | No
                 raise ValueError(f"field {where!r} ({fields[key]}) cannot be {value!r}: "
                                  f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
         elif is_array:
-            if not isinstance(value, list):
-                raise ValueError(f"field {where!r} is a {fields[key]}, got {value!r} (give a list)")
             cls = message_class(base)
             items = [fill_message(cls(), v, stamps, f"{where}[{i}].") for i, v in enumerate(value)]
             try:
