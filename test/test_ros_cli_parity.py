@@ -224,14 +224,9 @@ def test_topic_pub_delivers_the_exact_message_and_refuses_bad_fields(probe):
     assert list(js.name) == ["a", "b"] and list(js.position) == [1.0, 2.5], js
     assert js.header.stamp.sec > 0  # 'auto': stamped at publication
 
-    for values, error in (("{linar: {x: 0.1}}", "no field 'linar' in geometry_msgs/msg/Twist"),
-                          ("{linear: {x: fast}}", "field 'linear.x' is a double, got 'fast'"),
-                          ("{linear: 3}", "field 'linear' is a geometry_msgs/msg/Vector3"),
-                          ("[1, 2]", "the values need to be a dictionary")):
-        bad = cli("topic", "pub", "/cmd_vel", "geometry_msgs/msg/Twist", values, "-1")
-        assert bad.returncode == 2 and error in bad.stderr, (values, bad)
-        assert "publisher: beginning loop" not in bad.stdout, bad
-    wrong_type = cli("topic", "pub", "/cmd_vel", "geometry_msgs/msg/Twst", "{}", "-1")
-    assert wrong_type.returncode == 2 and "geometry_msgs/msg/Twst" in wrong_type.stderr, wrong_type
+    # refused before publishing, naming the field (the other refusals: the unit test above)
+    bad = cli("topic", "pub", "/cmd_vel", "geometry_msgs/msg/Twist", "{linar: {x: 0.1}}", "-1")
+    assert bad.returncode == 2 and "no field 'linar' in geometry_msgs/msg/Twist" in bad.stderr, bad
+    assert "publisher: beginning loop" not in bad.stdout, bad
     probe.spin_for(0.5)
-    assert len(got) == 4  # nothing published by the refused ones
+    assert len(got) == 4  # nothing published by the refused one
