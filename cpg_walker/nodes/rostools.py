@@ -225,9 +225,7 @@ def describe_parameters(s: Session, node: str, names: list[str], timeout: float 
     return list(res.descriptors)
 
 
-DESCRIPTOR_TYPE_NAMES = {0: "not set", 1: "boolean", 2: "integer", 3: "double", 4: "string",
-                         5: "byte array", 6: "boolean array", 7: "integer array", 8: "double array",
-                         9: "string array"}
+DESCRIPTOR_TYPE_NAMES = {0: "not set"} | {t: n.lower() for t, n in TYPE_NAMES.items()}  # describe's
 
 
 def format_descriptor(d: Any) -> str:
@@ -251,7 +249,6 @@ def format_descriptor(d: Any) -> str:
 
 def dump_parameters(s: Session, node: str, timeout: float = 10.0) -> str:
     """``ros2 param dump``'s YAML: ``/node: {ros__parameters: ...}``, dotted names nested, keys sorted."""
-
     node = node_name(node)
     names = list_parameters(s, node, timeout)
     values = get_parameters(s, node, names, timeout) if names else []
@@ -267,11 +264,12 @@ def parameters_yaml(node: str, values: dict[str, Any]) -> str:
     params: dict[str, Any] = {}
     for name in sorted(values):
         parts = name.split(".")
+        # the first proper prefix that is a parameter itself: nest above it, keep the rest as one key
         cut = next((i for i in range(1, len(parts)) if ".".join(parts[:i]) in values), len(parts))
         d = params
-        for g in parts[:cut - 1] if cut < len(parts) else parts[:-1]:
-            d = d.setdefault(g, {})
-        d[".".join(parts[cut - 1:]) if cut < len(parts) else parts[-1]] = values[name]
+        for group in parts[:cut - 1]:
+            d = d.setdefault(group, {})
+        d[".".join(parts[cut - 1:])] = values[name]
     return yaml.dump({node_name(node): {"ros__parameters": params}}, default_flow_style=False)
 
 
@@ -290,7 +288,7 @@ def message_class(type_name: str) -> type:
     parts = type_name.split("/")
     if len(parts) == 2:
         parts.insert(1, "msg")
-    if len(parts) != 3 or parts[1] != "msg" or not all(parts):
+    if len(parts) != 3 or not all(parts):
         raise ValueError(f"not a message type: {type_name!r} (expected pkg/msg/Type)")
     try:
         return getattr(importlib.import_module(f"{parts[0]}.{parts[1]}"), parts[2])
