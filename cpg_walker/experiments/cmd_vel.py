@@ -86,6 +86,7 @@ class Drive:
     rate_hz: float = 10.0
     tail_s: float = 8.0
     windows: tuple[tuple[float, float], ...] = field(default=())
+    reverse_via_stop: bool = True  # the follower's reversal procedure (False: ζ flipped at once)
 
 
 def drive_set(quick: bool = False) -> list[Drive]:
@@ -101,7 +102,16 @@ def drive_set(quick: bool = False) -> list[Drive]:
     d += [Drive(f"v {v:+g}", ((40.0, v, 0.0),)) for v in back]
     d += [Drive(f"v {v:+g} w {w:+g}", ((35.0, v, w),)) for v, w in turns]
     if not quick:
+        d += [Drive(f"v +0.085 w {w:+g}", ((35.0, 0.085, w),)) for w in (0.2, -0.2, 0.3)]
         d.append(Drive("turn then straight", ((30.0, 0.085, 0.1), (45.0, 0.085, 0.0))))
+        for via in (True, False):  # direction changes: our procedure (stop, swap ζ, step) vs ζ at once
+            how = "stop-swap-step" if via else "zeta flipped at once"
+            d += [Drive(f"+0.11 -> -0.1 ({how})", ((25.0, 0.11, 0.0), (45.0, -0.1, 0.0)),
+                        reverse_via_stop=via),
+                  Drive(f"+0.085 -> -0.03 ({how})", ((25.0, 0.085, 0.0), (45.0, -0.03, 0.0)),
+                        reverse_via_stop=via),
+                  Drive(f"-0.085 -> +0.085 ({how})", ((30.0, -0.085, 0.0), (50.0, 0.085, 0.0)),
+                        reverse_via_stop=via)]
     return d
 
 
@@ -152,6 +162,7 @@ def run_drive(drive: Drive, map_file: str | None = None) -> dict:
     fb = FeedbackController(FeedbackConfig.load())
     src = FeedbackGaitSource(ctrl, fb)
     follower = CmdVelFollower(smap, limits, zeta=1.0)
+    follower.reverse_via_stop = drive.reverse_via_stop
     cmds, t = [], drive.t0
     for until, vx, wz in drive.segments:
         while t < until - 1e-9:

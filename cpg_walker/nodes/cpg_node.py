@@ -368,7 +368,9 @@ class CPGNode(Node):
             subs.append(self.create_subscription(
                 WrenchStamped, f"/foot_load/{side}",
                 lambda msg, i=i, frame=frame: self._on_load(i, frame, msg), 100))
-        self.create_subscription(Twist, "/cmd_vel", self._on_cmd_vel, 10)  # not hot: a few per second
+        # /cmd_vel in the hot path too: a Twist is timed by the tick it arrives at (it has no stamp), so it
+        # must not wait in the executor's queue (one callback per executor_period)
+        subs.append(self.create_subscription(Twist, "/cmd_vel", self._on_cmd_vel, 10))
         self.hot = HotPath(self, subs)
         self._diagnostics(0)
         self.get_logger().info(f"CPG N={self.ctrl.net.N} from {self.origin}; recording's opening steps "

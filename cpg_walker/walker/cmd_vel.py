@@ -273,6 +273,7 @@ class CmdVelFollower:
         self.last: tuple[float, float, float] | None = None  # (t, linear.x, angular.z) as received
         self.target: tuple[float, float, float] = (self.zeta, 0.0, 0.0)
         self._reversing = False  # direction swapped, waiting for the applied ζ
+        self.reverse_via_stop = True  # False: flip ζ at once (measured against; README)
 
     def set_limits(self, limits: CmdVelLimits) -> None:
         self.limits = limits
@@ -307,7 +308,7 @@ class CmdVelFollower:
         if a == 0.0:
             self.state = "standing"
             return CmdVelOutput(self.zeta, 0.0, 0.0, self.state)
-        if math.copysign(1.0, z) != math.copysign(1.0, self.zeta):  # the direction flips
+        if math.copysign(1.0, z) != math.copysign(1.0, self.zeta) and self.reverse_via_stop:  # flips
             if applied_alpha > REVERSE_ALPHA:
                 self.state = "reversing"  # stop stepping first
                 return CmdVelOutput(self.zeta, 0.0, 0.0, self.state)
