@@ -18,6 +18,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--jobs", type=int, default=2, metavar="N", help="parallel walks (default 2)")
     d.add_argument("--quick", action="store_true", help="forward, backward, left, right only")
     d.add_argument("--speed-map", default=None, metavar="FILE", help="speed map (default: config/cpg.yaml's)")
+    d.add_argument("--graph", action="store_true",
+                   help="drive a graph started like `cpg-walker graph` (lockstep) by /cmd_vel instead, "
+                        "measured from /odom/ground_truth: DIR/drive_graph.json, .md")
+    d.add_argument("--attach", action="store_true",
+                   help="with --graph: drive the graph already running on --domain-id (or ROS_DOMAIN_ID)")
+    d.add_argument("--domain-id", type=int, default=None, metavar="N", help="with --graph: the DDS domain")
     d.set_defaults(func=_drive)
 
 
@@ -33,6 +39,12 @@ def _map(args: argparse.Namespace) -> int:
 
 
 def _drive(args: argparse.Namespace) -> int:
+    if args.graph:
+        from cpg_walker.experiments.cmd_vel_graph import drive_graph
+
+        drive_graph(args.out, args.domain_id, args.attach)
+        print(open(f"{args.out}/drive_graph.md", encoding="utf-8").read())
+        return 0
     from cpg_walker.experiments.cmd_vel import drive_check, drive_set
     from cpg_walker.progress import Progress
 

@@ -89,7 +89,10 @@ STATE_FIELDS = ("phase_rad", "frequency_hz", "amplitude_rad")
 INTERFACE = """\
 subscribes: /clock (rosgraph_msgs/Clock), /imu (sensor_msgs/Imu, frame 'imu': orientation + angular
   velocity), /foot_load/left and /foot_load/right (geometry_msgs/WrenchStamped, sole frames: force.z =
-  sole load N) - the sensors of the feedback pathways, on sim time
+  sole load N) - the sensors of the feedback pathways, on sim time; /cmd_vel (geometry_msgs/Twist):
+  followed from its first message on (cmd_vel.follow): linear.x -> zeta/alpha through the measured speed
+  map, angular.z -> the heading pathway's turn rate; no message for cmd_vel.timeout sim s -> alpha 0
+  (stands), the next resumes; a sign change of linear.x stops stepping before zeta changes sign
 publishes:
   /joint_targets (sensor_msgs/JointState): position + velocity of all 25 joints (the 10 CPG DOFs; the
     others follow the recording, then hold its mean), stamped with the tick (and with lookahead the next)
@@ -110,7 +113,12 @@ parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N wh
   the feedback core's),
   feedback.<field> for every FeedbackConfig field (defaults: config/feedback.yaml), sensor_timeout and
   feedback_fade (sim s), sensor_wait (wall s) - all settable at run time, validated; lockstep (wait for
-  each tick's sensor samples)"""
+  each tick's sensor samples); cmd_vel.follow, cmd_vel.timeout (sim s), cmd_vel.max_linear_x,
+  cmd_vel.min_linear_x (m/s), cmd_vel.max_angular_z (rad/s), cmd_vel.stand_below (m/s),
+  cmd_vel.speed_map (file) - settable at run time, validated; a zeta/alpha set while following /cmd_vel
+  holds until the next /cmd_vel message. /diagnostics adds cmd_vel (off | waiting | following | standing
+  | reversing | timed_out | parameters), the last command, its zeta/alpha/turn rate, cmd_vel_turn (ok, or
+  why angular.z cannot turn: feedback off, no heading pathway, standing; WARN)"""
 
 #: The float ``cmd_vel.*`` parameters: (key, description, min, max); their values: config/cpg.yaml.
 CMD_VEL_PARAMS = (
