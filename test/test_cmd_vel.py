@@ -11,6 +11,7 @@ import pytest
 
 from cpg_walker.walker.cmd_vel import (
     REVERSE_ALPHA,
+    REVERSE_ALPHA_RATE,
     CmdVelFollower,
     CmdVelLimits,
     CmdVelOutput,
@@ -128,7 +129,8 @@ def test_follower_follows_times_out_and_resumes():
 
 def test_reversal_stops_stepping_before_the_zeta_sign_flips():
     """Forward -> backward: α 0 with the old ζ until the applied α < REVERSE_ALPHA, then the new ζ with α 0
-    until the applied ζ is near it, then step; no ζ of the new sign is commanded while α is applied."""
+    until the applied ζ is near it, then step with α rising at REVERSE_ALPHA_RATE; no ζ of the new sign
+    is commanded while α is applied."""
     m = SpeedMap(toy_map())
     f = CmdVelFollower(m, limits(), zeta=1.0)
     f.command(0.0, 0.08, 0.0)
@@ -139,7 +141,17 @@ def test_reversal_stops_stepping_before_the_zeta_sign_flips():
     assert f.update(1.4, 1.0, 2 * REVERSE_ALPHA) == CmdVelOutput(1.0, 0.0, 0.0, "reversing")
     assert f.update(1.41, 1.0, REVERSE_ALPHA / 2) == CmdVelOutput(-1.0, 0.0, 0.0, "reversing")
     assert f.update(1.42, 0.2, 0.01) == CmdVelOutput(-1.0, 0.0, 0.0, "reversing")  # ζ still on its way
-    assert f.update(1.43, -0.95, 0.01) == CmdVelOutput(-1.0, 1.0, 0.1, "following")
+    out = f.update(1.43, -0.95, 0.01)  # stepping again, α rising at REVERSE_ALPHA_RATE per sim s
+    assert out == CmdVelOutput(-1.0, pytest.approx(REVERSE_ALPHA_RATE * 0.01), 0.1, "ramping")
+    t, alphas = 1.43, []
+    while out.state == "ramping":
+        t += 0.01
+        f.command(t, -0.09, 0.1)
+        out = f.update(t, -1.0, out.alpha)
+        alphas.append(out.alpha)
+    assert out == CmdVelOutput(-1.0, 1.0, 0.1, "following")
+    assert t - 1.43 == pytest.approx(1.0 / REVERSE_ALPHA_RATE, abs=0.02)
+    assert np.all(np.diff(alphas[:-1]) == pytest.approx(REVERSE_ALPHA_RATE * 0.01))
     # from standing (α already 0): the swap is immediate, then the wait for ζ
     f.command(1.5, 0.0, 0.0)
     f.update(1.5, -1.0, 1.0)

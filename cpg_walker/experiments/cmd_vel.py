@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.experiments.walk_runs import WalkSpec, run_many, run_walk
-from cpg_walker.walker.cmd_vel import CmdVelFollower, CmdVelLimits, SpeedMap, apply_output
+from cpg_walker.walker.cmd_vel import REVERSE_ALPHA_RATE, CmdVelFollower, CmdVelLimits, SpeedMap, apply_output
 from cpg_walker.walker.loop import heading_at
 
 #: The speed map's grid (ζ at α = 1; α at ζ = ±1), each walked from standing.
@@ -87,6 +87,8 @@ class Drive:
     tail_s: float = 8.0
     windows: tuple[tuple[float, float], ...] = field(default=())
     reverse_via_stop: bool = True  # the follower's reversal procedure (False: ζ flipped at once)
+    alpha_rate: float | None = None  # the follower's limit on every rise of the α command (per sim s)
+    reverse_alpha_rate: float | None = REVERSE_ALPHA_RATE  # ... on the rise after a reversal
 
 
 def drive_set(quick: bool = False) -> list[Drive]:
@@ -163,6 +165,8 @@ def run_drive(drive: Drive, map_file: str | None = None) -> dict:
     src = FeedbackGaitSource(ctrl, fb)
     follower = CmdVelFollower(smap, limits, zeta=1.0)
     follower.reverse_via_stop = drive.reverse_via_stop
+    follower.alpha_rate = drive.alpha_rate
+    follower.reverse_alpha_rate = drive.reverse_alpha_rate
     cmds, t = [], drive.t0
     for until, vx, wz in drive.segments:
         while t < until - 1e-9:

@@ -21,14 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
-#: (name, duration s, linear.x, angular.z) after the start; then ``STOP_S`` without commands.
-PLAN = (("forward", 12.0, 0.085, 0.0), ("left", 12.0, 0.085, 0.1), ("right", 12.0, 0.085, -0.1))
+#: (name, duration s, linear.x, angular.z, settle s) after the start, then ``STOP_S`` without commands;
+#: each window's first ``settle`` s are left out of the measurement (a turn builds up over ~8 s: the
+#: heading pathway's P law on a low-passed error has to lead the yaw by ~0.5 rad first).
+PLAN = (("forward", 12.0, 0.085, 0.0, 4.0), ("left", 20.0, 0.085, 0.1, 8.0),
+        ("right", 20.0, 0.085, -0.1, 8.0))
 STOP_S = 8.0
 #: A fresh graph: the first Twist at this sim time (the CPG has taken over the recording at ~6.6 s).
 START_S = 8.0
 RATE_HZ = 10.0
-#: Each window's first part is left out of the measurement (the change settling).
-SETTLE_S = 4.0
 
 
 def _yaw(q) -> float:
@@ -156,8 +157,8 @@ def measure(odom: np.ndarray, t0: float, sent: list, cmd_state: list) -> dict:
     t, xy, yaw = odom[:, 0], odom[:, 1:3], np.unwrap(odom[:, 3])
     rows = []
     start = t0
-    for name, dur, vx, wz in PLAN:
-        a, b = start + SETTLE_S, start + dur
+    for name, dur, vx, wz, settle in PLAN:
+        a, b = start + settle, start + dur
         sel = (t >= a) & (t <= b)
         rate = float(np.polyfit(t[sel], yaw[sel], 1)[0]) if sel.sum() > 10 else float("nan")
         fwd = 0.0

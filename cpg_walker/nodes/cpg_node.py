@@ -117,8 +117,8 @@ parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N wh
   cmd_vel.min_linear_x (m/s), cmd_vel.max_angular_z (rad/s), cmd_vel.stand_below (m/s),
   cmd_vel.speed_map (file) - settable at run time, validated; a zeta/alpha set while following /cmd_vel
   holds until the next /cmd_vel message. /diagnostics adds cmd_vel (off | waiting | following | standing
-  | reversing | timed_out | parameters), the last command, its zeta/alpha/turn rate, cmd_vel_turn (ok, or
-  why angular.z cannot turn: feedback off, no heading pathway, standing; WARN)"""
+  | reversing | ramping | timed_out | parameters), the last command, its zeta/alpha/turn rate,
+  cmd_vel_turn (ok, or why angular.z cannot turn: feedback off, no heading pathway, standing; WARN)"""
 
 #: The float ``cmd_vel.*`` parameters: (key, description, min, max); their values: config/cpg.yaml.
 CMD_VEL_PARAMS = (

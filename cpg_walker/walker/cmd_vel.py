@@ -12,8 +12,9 @@ the heading pathway's turn rate, a command timeout, and direction changes.
   ``update(t, applied_zeta, applied_alpha)`` -> ``CmdVelOutput`` (ζ, α, turn rate to command). States:
   ``waiting`` (no command yet: None, the node keeps its parameters' ζ/α), ``following``, ``standing``
   (|linear.x| below ``stand_below``: α -> 0, the robot stands), ``reversing`` (the sign of linear.x flipped
-  while stepping: α -> 0 first, ζ swapped once the applied α is below ``reverse_alpha``, α back once
-  the applied ζ is within ``reverse_zeta_tolerance`` of the new one), ``timed_out`` (no command for
+  while stepping: α -> 0 first, ζ swapped once the applied α is below REVERSE_ALPHA, α back once the
+  applied ζ is within REVERSE_ZETA_TOLERANCE of the new one), ``ramping`` (after a reversal the α command
+  rises at most REVERSE_ALPHA_RATE per sim s: measured safer, README), ``timed_out`` (no command for
   ``timeout`` sim s: α -> 0, turn 0, like diff_drive_controller's cmd_vel_timeout; the next command
   resumes). α -> 0 is smooth: HumanoidCPG's cascaded ζ/α command filter (3 × 0.25 s lags).
 * Turning: angular.z (clamped to ±``max_angular_z``) is FeedbackController.set_turn_rate: the heading
@@ -258,8 +259,10 @@ class CmdVelOutput:
 
 #: Reversal: α command 0 until the applied α is below this, ...
 REVERSE_ALPHA = 0.05
-#: ... then the new ζ, α 0 until the applied ζ is this close (fraction of |new ζ|) to it.
+#: ... then the new ζ, α 0 until the applied ζ is this close (fraction of |new ζ|) to it, ...
 REVERSE_ZETA_TOLERANCE = 0.1
+#: ... then the α command rises at most this fast (per sim s; measured: README "Driving with /cmd_vel").
+REVERSE_ALPHA_RATE = 0.1
 
 
 class CmdVelFollower:
@@ -274,6 +277,10 @@ class CmdVelFollower:
         self.target: tuple[float, float, float] = (self.zeta, 0.0, 0.0)
         self._reversing = False  # direction swapped, waiting for the applied ζ
         self.reverse_via_stop = True  # False: flip ζ at once (measured against; README)
+        self.alpha_rate: float | None = None  # limit on every rise of the α command (per sim s); None: none
+        self.reverse_alpha_rate: float | None = REVERSE_ALPHA_RATE  # ... after a reversal
+        self._ramp = False
+        self._t_prev, self._alpha_out = 0.0, 1.0
 
     def set_limits(self, limits: CmdVelLimits) -> None:
         self.limits = limits
@@ -303,23 +310,37 @@ class CmdVelFollower:
             return None
         if t - self.last[0] > self.limits.timeout:
             self.state = "timed_out"
-            return CmdVelOutput(self.zeta, 0.0, 0.0, self.state)
+            return self._out(t, self.zeta, 0.0, 0.0)
         z, a, w = self.target
         if a == 0.0:
             self.state = "standing"
-            return CmdVelOutput(self.zeta, 0.0, 0.0, self.state)
+            return self._out(t, self.zeta, 0.0, 0.0)
         if math.copysign(1.0, z) != math.copysign(1.0, self.zeta) and self.reverse_via_stop:  # flips
             if applied_alpha > REVERSE_ALPHA:
                 self.state = "reversing"  # stop stepping first
-                return CmdVelOutput(self.zeta, 0.0, 0.0, self.state)
+                return self._out(t, self.zeta, 0.0, 0.0)
             self.zeta, self._reversing = z, True  # stepping has stopped: swap the direction
         if self._reversing:
             if abs(applied_zeta - z) > REVERSE_ZETA_TOLERANCE * abs(z):
                 self.state = "reversing"  # the new ζ first, then step again
-                return CmdVelOutput(z, 0.0, 0.0, self.state)
-            self._reversing = False
+                return self._out(t, z, 0.0, 0.0)
+            self._reversing, self._ramp = False, True
         self.zeta = z
         self.state = "following"
+        rate = self.alpha_rate
+        if rate is None and self._ramp:
+            rate = self.reverse_alpha_rate
+        if rate is not None:  # the α command rises at most ``rate`` per sim s
+            ramped = self._alpha_out + rate * max(t - self._t_prev, 0.0)
+            if ramped < a:
+                a = ramped
+                self.state = "ramping"
+            else:
+                self._ramp = False
+        return self._out(t, z, a, w)
+
+    def _out(self, t: float, z: float, a: float, w: float) -> CmdVelOutput:
+        self._t_prev, self._alpha_out = t, a
         return CmdVelOutput(z, a, w, self.state)
 
 
