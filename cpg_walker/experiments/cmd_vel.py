@@ -106,14 +106,16 @@ def drive_set(quick: bool = False) -> list[Drive]:
     if not quick:
         d += [Drive(f"v +0.085 w {w:+g}", ((35.0, 0.085, w),)) for w in (0.2, -0.2, 0.3)]
         d.append(Drive("turn then straight", ((30.0, 0.085, 0.1), (45.0, 0.085, 0.0))))
-        for via in (True, False):  # direction changes: our procedure (stop, swap ζ, step) vs ζ at once
-            how = "stop-swap-step" if via else "zeta flipped at once"
-            d += [Drive(f"+0.11 -> -0.1 ({how})", ((25.0, 0.11, 0.0), (45.0, -0.1, 0.0)),
-                        reverse_via_stop=via),
-                  Drive(f"+0.085 -> -0.03 ({how})", ((25.0, 0.085, 0.0), (45.0, -0.03, 0.0)),
-                        reverse_via_stop=via),
-                  Drive(f"-0.085 -> +0.085 ({how})", ((30.0, -0.085, 0.0), (50.0, 0.085, 0.0)),
-                        reverse_via_stop=via)]
+        d.append(Drive("+0.085 -> stand -> +0.085",
+                       ((25.0, 0.085, 0.0), (35.0, 0.0, 0.0), (55.0, 0.085, 0.0))))
+        # direction changes: ours (stop, swap ζ, step with α ramping at REVERSE_ALPHA_RATE), the same
+        # without the ramp, and ζ flipped at once
+        for how, via, rate in (("stop-swap-ramp", True, REVERSE_ALPHA_RATE),
+                               ("stop-swap, no ramp", True, None), ("zeta flipped at once", False, None)):
+            for (v1, t1), (v2, t2) in (((0.11, 25.0), (-0.1, 60.0)), ((0.085, 25.0), (-0.085, 60.0)),
+                                       ((0.085, 25.0), (-0.03, 45.0)), ((-0.085, 30.0), (0.085, 65.0))):
+                d.append(Drive(f"{v1:+g} -> {v2:+g} ({how})", ((t1, v1, 0.0), (t2, v2, 0.0)),
+                               reverse_via_stop=via, reverse_alpha_rate=rate))
     return d
 
 

@@ -262,7 +262,7 @@ REVERSE_ALPHA = 0.05
 #: ... then the new ζ, α 0 until the applied ζ is this close (fraction of |new ζ|) to it, ...
 REVERSE_ZETA_TOLERANCE = 0.1
 #: ... then the α command rises at most this fast (per sim s; measured: README "Driving with /cmd_vel").
-REVERSE_ALPHA_RATE = 0.1
+REVERSE_ALPHA_RATE = 0.05
 
 
 class CmdVelFollower:
