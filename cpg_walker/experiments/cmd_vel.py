@@ -101,8 +101,9 @@ def drive_set(quick: bool = False) -> list[Drive]:
     if quick:
         fwd, back, turns = [0.085], [-0.085], [(0.085, 0.1), (0.085, -0.1)]
     d = [Drive(f"v {v:+g}", ((35.0, v, 0.0),)) for v in fwd]
-    d += [Drive(f"v {v:+g}", ((40.0, v, 0.0),)) for v in back]
-    d += [Drive(f"v {v:+g} w {w:+g}", ((35.0, v, w),)) for v, w in turns]
+    # backward from the forward walk: a reversal first (stop, swap, α ramp ~20 s): measured after it
+    d += [Drive(f"v {v:+g}", ((55.0, v, 0.0),)) for v in back]
+    d += [Drive(f"v {v:+g} w {w:+g}", ((35.0 if v > 0 else 55.0, v, w),)) for v, w in turns]
     if not quick:
         d += [Drive(f"v +0.085 w {w:+g}", ((35.0, 0.085, w),)) for w in (0.2, -0.2, 0.3)]
         d.append(Drive("turn then straight", ((30.0, 0.085, 0.1), (45.0, 0.085, 0.0))))
@@ -112,8 +113,8 @@ def drive_set(quick: bool = False) -> list[Drive]:
         # without the ramp, and ζ flipped at once
         for how, via, rate in (("stop-swap-ramp", True, REVERSE_ALPHA_RATE),
                                ("stop-swap, no ramp", True, None), ("zeta flipped at once", False, None)):
-            for (v1, t1), (v2, t2) in (((0.11, 25.0), (-0.1, 60.0)), ((0.085, 25.0), (-0.085, 60.0)),
-                                       ((0.085, 25.0), (-0.03, 45.0)), ((-0.085, 30.0), (0.085, 65.0))):
+            for (v1, t1), (v2, t2) in (((0.11, 25.0), (-0.1, 70.0)), ((0.085, 25.0), (-0.085, 70.0)),
+                                       ((0.085, 25.0), (-0.03, 45.0)), ((-0.085, 55.0), (0.085, 100.0))):
                 d.append(Drive(f"{v1:+g} -> {v2:+g} ({how})", ((t1, v1, 0.0), (t2, v2, 0.0)),
                                reverse_via_stop=via, reverse_alpha_rate=rate))
     return d
