@@ -57,7 +57,10 @@ def measure_speed_map(out: str | Path, jobs: int = 2, window_s: float = MAP_WIND
                      **{k: m.get(k) for k in ("steady_speed_mps", "heading_change_deg", "lateral_drift_m")}})
     (out / "speed_map.json").write_text(json.dumps({"window_s": window_s, "runs": rows}, indent=2) + "\n")
     ok = [r for r in rows if not r["fell"] and r["error"] is None]
-    doc = {"forward": {"zeta_speed": [[r["zeta"], r["steady_speed_mps"]] for r in ok
+    doc = {"measured": {"command": "cpg-walker cmd-vel-map --out DIR", "start": "standing",
+                        "window_s": window_s, "speed": "steady_speed_mps (second half of the window)"},
+           "slow_abs_zeta": 1.0,
+           "forward": {"zeta_speed": [[r["zeta"], r["steady_speed_mps"]] for r in ok
                                       if r["alpha"] == 1.0 and r["zeta"] > 0],
                        "alpha_speed": [[r["alpha"], r["steady_speed_mps"]] for r in ok
                                        if r["alpha"] != 1.0 and r["zeta"] > 0]},

@@ -43,6 +43,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
     from cpg_walker.nodes.graph import isolated_env, quiet_domain_id
@@ -80,6 +81,8 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     node.create_subscription(Odometry, "/odom/ground_truth", on_odom, 200)
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
     pub = node.create_publisher(Twist, "/cmd_vel", 10)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
     sent: list[tuple[float, float, float]] = []
     t0 = None
     end_wall = time.monotonic() + wall_limit_s
@@ -87,7 +90,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     last_report = 0.0
     try:
         while time.monotonic() < end_wall:
-            _spin(node, ctx)
+            executor.spin_once(timeout_sec=0.01)
             if proc is not None and proc.poll() is not None:
                 break
             if not odom:
@@ -110,6 +113,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
                 print(f"drive-check --graph: sim {t:.1f} / {t0 + total:.1f} s", file=sys.stderr, flush=True)
                 last_report = time.monotonic()
     finally:
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
         if proc is not None:
@@ -130,17 +134,6 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     (out / "drive_graph.json").write_text(json.dumps(res, indent=2) + "\n")
     (out / "drive_graph.md").write_text(markdown(res))
     return res
-
-
-def _spin(node, ctx) -> None:
-    from rclpy.executors import SingleThreadedExecutor
-
-    ex = getattr(node, "_drive_executor", None)
-    if ex is None:
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(node)
-        node._drive_executor = ex
-    ex.spin_once(timeout_sec=0.01)
 
 
 def _segment(dt: float):
