@@ -223,3 +223,18 @@ def test_heading_anti_windup_and_hold():
     for k in range(1, 1001):
         free.observe(k * dt, _quat(0.0), np.zeros(3), (10.0, 10.0))
     assert free.heading_ref == pytest.approx(5.0, rel=1e-6)
+
+
+def test_a_twist_drives_the_in_process_robot_and_the_timeout_stops_it():
+    """The follower as cpg_node applies it, on the simulated robot (experiments/cmd_vel.py run_drive):
+    0.06 m/s with a 0.1 rad/s left turn from 10 s; the speed over 14.8-22 s is the command within 10 %,
+    the robot turns left, and after the last Twist (22 s) the timeout stops it: the base moves < 1 cm/s
+    within 2.5 s and stays upright."""
+    from cpg_walker.experiments.cmd_vel import Drive, run_drive
+
+    m = run_drive(Drive("t", ((22.0, 0.06, 0.1),), tail_s=5.0))
+    assert not m["fell"], m
+    (seg,) = m["segments"]
+    assert seg["speed_mps"] == pytest.approx(0.06, rel=0.1), seg
+    assert seg["turn_rate_rad_s"] > 0.02, seg
+    assert m["speed_below_1cm_s_after_s"] is not None and m["speed_below_1cm_s_after_s"] <= 2.5, m
