@@ -32,7 +32,7 @@ from typing import get_type_hints
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import Twist, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
@@ -70,6 +70,15 @@ from cpg_walker.nodes.runtime import (
 )
 from cpg_walker.nodes.validation import check_finite_scalar, reason_key, to_ns, validate_imu, validate_load
 from cpg_walker.walker import feedback as feedback_core
+from cpg_walker.walker.cmd_vel import (
+    LIMIT_KEYS,
+    CmdVelFollower,
+    CmdVelLimits,
+    CmdVelOutput,
+    SpeedMap,
+    apply_output,
+    check_twist,
+)
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE, HumanoidCPG, modulation_error
 from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig, FeedbackController
 from cpg_walker.walker.gait_source import FeedbackGaitSource, _smootherstep
@@ -80,7 +89,10 @@ STATE_FIELDS = ("phase_rad", "frequency_hz", "amplitude_rad")
 INTERFACE = """\
 subscribes: /clock (rosgraph_msgs/Clock), /imu (sensor_msgs/Imu, frame 'imu': orientation + angular
   velocity), /foot_load/left and /foot_load/right (geometry_msgs/WrenchStamped, sole frames: force.z =
-  sole load N) - the sensors of the feedback pathways, on sim time
+  sole load N) - the sensors of the feedback pathways, on sim time; /cmd_vel (geometry_msgs/Twist):
+  followed from its first message on (cmd_vel.follow): linear.x -> zeta/alpha through the measured speed
+  map, angular.z -> the heading pathway's turn rate; no message for cmd_vel.timeout sim s -> alpha 0
+  (stands), the next resumes; a sign change of linear.x stops stepping before zeta changes sign
 publishes:
   /joint_targets (sensor_msgs/JointState): position + velocity of all 25 joints (the 10 CPG DOFs; the
     others follow the recording, then hold its mean), stamped with the tick (and with lookahead the next)
@@ -101,7 +113,44 @@ parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N wh
   the feedback core's),
   feedback.<field> for every FeedbackConfig field (defaults: config/feedback.yaml), sensor_timeout and
   feedback_fade (sim s), sensor_wait (wall s) - all settable at run time, validated; lockstep (wait for
-  each tick's sensor samples)"""
+  each tick's sensor samples); cmd_vel.follow, cmd_vel.timeout (sim s), cmd_vel.max_linear_x,
+  cmd_vel.min_linear_x (m/s), cmd_vel.max_angular_z (rad/s), cmd_vel.stand_below (m/s),
+  cmd_vel.speed_map (file) - settable at run time, validated; a zeta/alpha set while following /cmd_vel
+  holds until the next /cmd_vel message. /diagnostics adds cmd_vel (off | waiting | following | standing
+  | reversing | ramping | timed_out | parameters), the last command, its zeta/alpha/turn rate,
+  cmd_vel_turn (ok, or why angular.z cannot turn: feedback off, no heading pathway, standing; WARN)"""
+
+#: The float ``cmd_vel.*`` parameters: (key, description, min, max); their values: config/cpg.yaml.
+CMD_VEL_PARAMS = (
+    ("timeout", "sim s without a /cmd_vel message before stepping stops (alpha -> 0)", 0.01, 60.0),
+    ("max_linear_x", "largest forward linear.x followed (m/s; larger is clamped)", 0.0, 1.0),
+    ("min_linear_x", "most negative (backward) linear.x followed (m/s; smaller is clamped)", -1.0, 0.0),
+    ("max_angular_z", "largest |angular.z| followed (rad/s; larger is clamped)", 0.0, 1.0),
+    ("stand_below", "|linear.x| below this (m/s): stand (alpha 0)", 0.0, 0.1),
+)
+assert tuple(k for k, *_ in CMD_VEL_PARAMS) == LIMIT_KEYS
+
+
+def load_speed_map(name: object) -> SpeedMap:
+    """``cmd_vel.speed_map``'s file as a SpeedMap, else ValueError with the reason."""
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"cmd_vel.speed_map must name a speed map file, got {name!r}")
+    try:
+        return SpeedMap.load(name)
+    except FileNotFoundError as exc:
+        raise ValueError(f"cmd_vel.speed_map: {exc}") from None
+
+
+def turn_unavailable(enabled: bool, weight: float, pathways: tuple[str, ...]) -> str:
+    """Why angular.z cannot turn the robot ('' if it can): turning is the heading feedback pathway."""
+    if "heading" not in pathways:
+        return "the heading feedback pathway is not in feedback_pathways"
+    if not enabled:
+        return "feedback is off"
+    if weight <= 0.0:
+        return "feedback has faded out (stale sensors)"
+    return ""
+
 
 #: Sensor samples kept per topic, by stamp (lockstep takes the one stamped like its tick).
 SENSOR_KEEP = 32
@@ -293,6 +342,7 @@ class CPGNode(Node):
         fb.weight = self.fade.weight
         self.source = FeedbackGaitSource(self.ctrl, fb, zeta=zeta, alpha=alpha)
         self.walk_from_s = self.source.handover + self.source.blend
+        self._declare_cmd_vel(zeta)
         self._warm_up()
         self.stage = "converged"
         self.add_on_set_parameters_callback(self._on_set)
@@ -326,10 +376,29 @@ class CPGNode(Node):
             subs.append(self.create_subscription(
                 WrenchStamped, f"/foot_load/{side}",
                 lambda msg, i=i, frame=frame: self._on_load(i, frame, msg), 100))
+        # /cmd_vel in the hot path too: a Twist is timed by the tick it arrives at (it has no stamp), so it
+        # must not wait in the executor's queue (one callback per executor_period)
+        subs.append(self.create_subscription(Twist, "/cmd_vel", self._on_cmd_vel, 10))
         self.hot = HotPath(self, subs)
         self._diagnostics(0)
         self.get_logger().info(f"CPG N={self.ctrl.net.N} from {self.origin}; recording's opening steps "
                                f"to {self.source.handover:.3f} s, CPG from {self.walk_from_s:.3f} s")
+
+    def _declare_cmd_vel(self, zeta: float) -> None:
+        """The ``cmd_vel.*`` parameters (config/cpg.yaml) and the follower (walker/cmd_vel.py)."""
+        self.cmd_follow = bool(declare(self, "cmd_vel.follow", bool_param(
+            "follow /cmd_vel from its first message on (false: ignore it; zeta/alpha parameters only)")))
+        lim = {k: declare(self, f"cmd_vel.{k}", float_param(text, lo, hi))
+               for k, text, lo, hi in CMD_VEL_PARAMS}
+        limits = CmdVelLimits(**{k: float(v) for k, v in lim.items()})
+        map_file = declare(self, "cmd_vel.speed_map", str_param(
+            "measured speed vs zeta/alpha for linear.x (a path, or a name in the package's config/)"))
+        self.cmd_map = load_speed_map(map_file)
+        self.cmd = CmdVelFollower(self.cmd_map, limits, zeta)
+        self.cmd_override = False  # a zeta/alpha parameter set while following: holds until the next Twist
+        self.cmd_stats = {"received": 0, "dropped": 0, "ignored": 0}
+        self.cmd_out = None  # the follower's last output (CmdVelOutput)
+        self.cmd_turn = "ok"  # ok | why angular.z cannot turn the robot
 
     def _controller(self, cpg_file: str, n: int | None) -> tuple[HumanoidCPG, str, bool]:
         if not cpg_file:
@@ -416,6 +485,7 @@ class CPGNode(Node):
         for a value it refuses)."""
         changes: dict[str, float] = {}
         fb_changes: dict[str, object] = {}
+        cmd_changes: dict[str, object] = {}
         pathways = None
         try:
             for prm in params:
@@ -433,6 +503,9 @@ class CPGNode(Node):
                     check_finite_scalar(name, value, 1e-3, 60.0 if name == "sensor_wait" else 10.0)
                 elif name == "feedback_fade":
                     check_finite_scalar(name, value, 0.0, 60.0)
+                elif name.startswith("cmd_vel."):
+                    cmd_changes[name[len("cmd_vel."):]] = value
+            cmd_apply = self._check_cmd_vel(cmd_changes)
             fb = self.source.fb
             cfg = FeedbackConfig.load(**{**asdict(fb.cfg), **fb_changes}) if fb_changes else fb.cfg
         except (ValueError, TypeError) as exc:
@@ -452,10 +525,128 @@ class CPGNode(Node):
                 self.fade.fade_s = float(prm.value)
             elif prm.name == "sensor_wait":
                 self.sensor_wait = float(prm.value)
+        cmd_apply()
         if changes:
-            self._command(changes.get("zeta", self.get_parameter("zeta").value),
-                          changes.get("alpha", self.get_parameter("alpha").value))
+            zeta = changes.get("zeta", self.get_parameter("zeta").value)
+            self._command(zeta, changes.get("alpha", self.get_parameter("alpha").value))
+            if self.cmd.last is not None and self.cmd_follow:
+                self.cmd_override = True  # the parameter holds until the next /cmd_vel message
+                self.cmd.zeta = float(zeta) if zeta else self.cmd.zeta
+                self._turn(0.0)
+                self.get_logger().info("zeta/alpha set while following /cmd_vel: they hold until the next "
+                                       "/cmd_vel message")
         return SetParametersResult(successful=True)
+
+    def _check_cmd_vel(self, changes: dict[str, object]):
+        """Validate ``cmd_vel.*`` changes (ValueError with the reason); return the function applying them."""
+        if not changes:
+            return lambda: None
+        follow = changes.pop("follow", None)
+        if follow is not None and not isinstance(follow, bool):
+            raise ValueError(f"cmd_vel.follow must be a bool, got {type(follow).__name__}")
+        smap = None
+        if "speed_map" in changes:
+            smap = load_speed_map(changes.pop("speed_map"))
+        limits = self.cmd.limits
+        if changes:
+            vals = {**limits.as_dict(),
+                    **{k: check_finite_scalar(f"cmd_vel.{k}", v) for k, v in changes.items()}}
+            limits = CmdVelLimits(**vals)
+
+        def apply() -> None:
+            if smap is not None:
+                self.cmd.map = self.cmd_map = smap
+            self.cmd.set_limits(limits)
+            if follow is not None and follow != self.cmd_follow:
+                self.cmd_follow = follow
+                if not follow and self.cmd.last is not None:
+                    self._stop_following("cmd_vel.follow set false")
+                self.get_logger().info(f"cmd_vel.follow {str(follow).lower()}")
+        return apply
+
+    def _stop_following(self, why: str) -> None:
+        """Back to the zeta/alpha parameters; the follower waits for a first message again."""
+        zeta, alpha = self.get_parameter("zeta").value, self.get_parameter("alpha").value
+        self.cmd = CmdVelFollower(self.cmd_map, self.cmd.limits, zeta)
+        self.cmd_out, self.cmd_override = None, False
+        self._turn(0.0)
+        self._command(zeta, alpha)
+        self.get_logger().info(f"{why}: not following /cmd_vel; zeta/alpha parameters again")
+
+    def _turn(self, rate: float) -> None:
+        fb = self.source.fb
+        if rate == 0.0 and fb.turn_rate != 0.0:
+            fb.hold_heading()
+        fb.set_turn_rate(rate)
+
+    # ---------------------------------------------------------------- /cmd_vel
+    def _on_cmd_vel(self, msg: Twist) -> None:
+        lin, ang = msg.linear, msg.angular
+        try:
+            check_twist(lin.x, ang.z, (lin.y, lin.z, ang.x, ang.y))
+        except ValueError as exc:
+            self.cmd_stats["dropped"] += 1
+            self.throttle.warn(self, "/cmd_vel " + reason_key(exc), f"dropped /cmd_vel: {exc}")
+            return
+        if not self.cmd_follow:
+            self.cmd_stats["ignored"] += 1
+            return
+        self.cmd_stats["received"] += 1
+        t = (self.last_tick_ns or 0) / 1e9  # a Twist has no stamp: received at the newest tick's sim time
+        if self.cmd.last is None:
+            self.get_logger().info(f"following /cmd_vel from sim {t:.3f} s (timeout "
+                                   f"{self.cmd.limits.timeout:g} sim s)")
+        self.cmd_override = False
+        self.cmd.command(t, float(lin.x), float(ang.z))
+
+    def _cmd_vel_tick(self, t_ns: int) -> None:
+        """Apply the follower's output for tick t_ns (once the CPG has taken over)."""
+        if self.cmd.last is None or self.cmd_override or t_ns < self.walk_from_s * 1e9:
+            return
+        out = self.cmd.update(t_ns / 1e9, self.ctrl.zeta, self.ctrl.alpha)
+        if out is None:
+            return
+        prev = self.cmd_out
+        fb = self.source.fb
+        reason = turn_unavailable(self.fb_enabled, self.fade.weight, fb.pathways)
+        want = self.cmd.limits.clamp_angular(self.cmd.last[2])
+        self.cmd_turn = reason if reason and want != 0.0 else "ok"
+        if reason and out.turn_rate != 0.0:
+            out = CmdVelOutput(out.zeta, out.alpha, 0.0, out.state)
+        if reason and want != 0.0:
+            self.throttle.warn(self, "/cmd_vel turn", f"/cmd_vel angular.z {want:g} rad/s cannot turn the "
+                               f"robot: {reason}")
+        if want != 0.0 and out.state == "standing":
+            self.cmd_turn = "cannot turn in place (stands: |linear.x| < cmd_vel.stand_below)"
+            self.throttle.warn(self, "/cmd_vel turn in place", f"/cmd_vel angular.z {want:g} rad/s with "
+                               "linear.x ~ 0: the robot turns only while stepping; it stands")
+        apply_output(self.ctrl, fb, out)
+        if prev is None or (prev.zeta, prev.alpha, prev.state) != (out.zeta, out.alpha, out.state):
+            self.get_logger().info(f"/cmd_vel {out.state}: zeta {out.zeta:.3g}, alpha {out.alpha:.3g}, turn "
+                                   f"{out.turn_rate:.3g} rad/s at sim {t_ns / 1e9:.3f} s")
+        self.cmd_out = out
+
+    def _cmd_vel_values(self, t_ns: int) -> dict[str, str]:
+        """The /cmd_vel part of /diagnostics."""
+        c = self.cmd
+        if not self.cmd_follow:
+            state = "off"
+        elif c.last is None:
+            state = "waiting"
+        elif self.cmd_override:
+            state = "parameters"
+        else:
+            state = c.state
+        v = {"cmd_vel": state, "cmd_vel_received": str(self.cmd_stats["received"]),
+             "cmd_vel_dropped": str(self.cmd_stats["dropped"]), "cmd_vel_turn": self.cmd_turn}
+        if c.last is not None:
+            v.update({"cmd_vel_linear_x": f"{c.last[1]:g}", "cmd_vel_angular_z": f"{c.last[2]:g}",
+                      "cmd_vel_age_s": f"{max(0.0, t_ns / 1e9 - c.last[0]):.3f}"})
+        if self.cmd_out is not None:
+            o = self.cmd_out
+            v.update({"cmd_vel_zeta": f"{o.zeta:.6g}", "cmd_vel_alpha": f"{o.alpha:.6g}",
+                      "cmd_vel_turn_rate": f"{o.turn_rate:.6g}"})
+        return v
 
     def _command(self, zeta: float, alpha: float) -> None:
         """Before the CPG has taken over, the command waits for the end of the cross-fade."""
@@ -575,6 +766,7 @@ class CPGNode(Node):
         self.activity.tick()
         new = self.last_tick_ns is None or t_ns > self.last_tick_ns
         if new:
+            self._cmd_vel_tick(t_ns)
             self._feedback_tick(t_ns)
         if t_ns != self.sent_ns:
             self._publish(t_ns)
@@ -628,7 +820,8 @@ class CPGNode(Node):
         tick costs one state read, not two message builds and publishes (about 150 us of CPU). Without an
         idle step the next monitor tick publishes the pending one first."""
         self._flush_monitor()
-        self.monitor_due = (t_ns, state_vector(self.ctrl), self._feedback_values())
+        self.monitor_due = (t_ns, state_vector(self.ctrl), {**self._feedback_values(),
+                                                             **self._cmd_vel_values(t_ns)})
 
     def _idle(self) -> None:
         """Every 20 ms of wall time (runtime.spin_hot): a lockstep tick whose samples are late may have
@@ -673,6 +866,9 @@ class CPGNode(Node):
                 and feedback["feedback_enabled"] == "true":
             level = max(level, DiagnosticStatus.WARN)
             text += f"; feedback {feedback['feedback']} (sensor data {feedback['sensor_age_s']} s old)"
+        if feedback is not None and feedback.get("cmd_vel_turn", "ok") != "ok":
+            level = max(level, DiagnosticStatus.WARN)
+            text += f"; /cmd_vel angular.z cannot turn: {feedback['cmd_vel_turn']}"
         status = DiagnosticStatus(level=level, name="cpg_walker/cpg", message=text, hardware_id="cpg",
                                   values=[KeyValue(key=k, value=v) for k, v in values.items()])
         arr = DiagnosticArray(status=[status])
@@ -688,7 +884,7 @@ class CPGNode(Node):
         exit_log(self, "stats " + json.dumps({**self.activity.summary(), "overruns": timing["overruns"],
                                               "tick": timing, "gc": gc_summary(self),
                                               "horizon_work": latency_summary(self.horizon_work),
-                                              "feedback": feedback}))
+                                              "feedback": feedback, "cmd_vel": self.cmd_stats}))
 
 
 

@@ -324,6 +324,7 @@ class FeedbackController:
         self._weight = 1.0
         self.turn_rate = 0.0  # rad/s, commanded (a later /cmd_vel); advances the heading reference
         self.heading_ref: float | None = None  # rad, None until captured (``capture_heading``)
+        self.heading_window_rad = math.inf  # anti-windup: |heading_ref - yaw| kept within this
         self._herr = LowPass(cfg.heading_time_constant_s)
         self.heading_error = 0.0  # filtered (rad)
         self.touchdowns = (False, False)  # (left, right) events of the last observe
@@ -363,6 +364,13 @@ class FeedbackController:
         self.heading_ref = self.yaw
         self._herr.y = None
 
+    def hold_heading(self) -> None:
+        """Make the walked heading the reference (a turn command ended): the reference minus the filtered
+        error, i.e. the yaw without its within-stride sway. The filtered error then decays smoothly
+        (``heading_time_constant_s``) instead of turning the robot on through the lag of the turn."""
+        if self.heading_ref is not None:
+            self.heading_ref -= self.heading_error
+
     # ---- sensing
     def observe(self, t: float, quat_wxyz: np.ndarray, gyro: np.ndarray, loads: tuple[float, float]) -> None:
         """One control tick's readings: chest IMU orientation (w, x, y, z) and angular velocity (rad/s,
@@ -379,6 +387,8 @@ class FeedbackController:
         self.gyro = np.asarray(gyro, dtype=float)
         if self.heading_ref is not None:
             self.heading_ref += self.turn_rate * dt
+            w = self.heading_window_rad
+            self.heading_ref = min(max(self.heading_ref, self.yaw - w), self.yaw + w)
             self.heading_error = float(self._herr.update(np.array([self.heading_ref - self.yaw]), dt)[0])
         self._t = t
         self.touchdowns = self.touch.update(t, loads)

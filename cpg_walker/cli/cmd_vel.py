@@ -1,0 +1,55 @@
+"""`cpg-walker cmd-vel-map --out DIR` (measure config/speed_map.yaml's data) and `cpg-walker drive-check
+--out DIR [--quick]` (commanded vs actual speed and turn rate of /cmd_vel driving, in-process;
+experiments/cmd_vel.py)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("cmd-vel-map", help="measure /cmd_vel's speed vs zeta/alpha map (in-process)")
+    p.add_argument("--out", required=True, help="output directory (speed_map.yaml, speed_map.json)")
+    p.add_argument("--jobs", type=int, default=2, metavar="N", help="parallel walks (default 2)")
+    p.add_argument("--window", type=float, default=30.0, metavar="S", help="sim s walked after the command")
+    p.set_defaults(func=_map)
+    d = sub.add_parser("drive-check", help="/cmd_vel commanded vs actual speed and turn rate: table + plot")
+    d.add_argument("--out", required=True, help="output directory (drive_check.json, .md, .png)")
+    d.add_argument("--jobs", type=int, default=2, metavar="N", help="parallel walks (default 2)")
+    d.add_argument("--quick", action="store_true", help="forward, backward, left, right only")
+    d.add_argument("--speed-map", default=None, metavar="FILE", help="speed map (default: config/cpg.yaml's)")
+    d.add_argument("--graph", action="store_true",
+                   help="drive a graph started like `cpg-walker graph` (lockstep) by /cmd_vel instead, "
+                        "measured from /odom/ground_truth: DIR/drive_graph.json, .md")
+    d.add_argument("--attach", action="store_true",
+                   help="with --graph: drive the graph already running on --domain-id (or ROS_DOMAIN_ID)")
+    d.add_argument("--domain-id", type=int, default=None, metavar="N", help="with --graph: the DDS domain")
+    d.set_defaults(func=_drive)
+
+
+def _map(args: argparse.Namespace) -> int:
+    from cpg_walker.experiments.cmd_vel import map_specs, measure_speed_map
+    from cpg_walker.progress import Progress
+
+    prog = Progress(len(map_specs(args.window)), "cmd-vel-map", "walks")
+    doc = measure_speed_map(args.out, args.jobs, args.window, prog)
+    prog.close()
+    print(f"wrote {args.out}/speed_map.yaml ({len(doc['fell'])} walks fell)")
+    return 0
+
+
+def _drive(args: argparse.Namespace) -> int:
+    if args.graph:
+        from cpg_walker.experiments.cmd_vel_graph import drive_graph
+
+        drive_graph(args.out, args.domain_id, args.attach)
+        print(open(f"{args.out}/drive_graph.md", encoding="utf-8").read())
+        return 0
+    from cpg_walker.experiments.cmd_vel import drive_check, drive_set
+    from cpg_walker.progress import Progress
+
+    prog = Progress(len(drive_set(args.quick)), "drive-check", "drives")
+    drive_check(args.out, args.jobs, args.quick, args.speed_map, prog)
+    prog.close()
+    print(open(f"{args.out}/drive_check.md", encoding="utf-8").read())
+    return 0

@@ -1,0 +1,193 @@
+"""Driving by /cmd_vel through the ROS graph (``cpg-walker drive-check --graph --out DIR``): start the graph
+exactly as ``cpg-walker graph`` does (that command, in a subprocess, lockstep pacing, on a free DDS domain),
+or attach to one already running (``--attach --domain-id N``), then from this process publish
+geometry_msgs/Twist on /cmd_vel at 10 Hz of sim time (forward, forward + left, forward + right, then
+nothing: the timeout) and measure from /odom/ground_truth: the forward speed (displacement along the
+stride-mean heading, 1 s pieces), the turn rates (a line fitted to the unwrapped yaw over each window: the
+within-stride sway averages out) and the stop after the last command (when the base moves < 1 cm in 1 s);
+cpg_node's /diagnostics give the time its cmd_vel state turned ``timed_out``. DIR/drive_graph.json, .md.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: (name, duration s, linear.x, angular.z, settle s) after the start, then ``STOP_S`` without commands;
+#: each window's first ``settle`` s are left out of the measurement (a turn builds up over ~8 s: the
+#: heading pathway's P law on a low-passed error has to lead the yaw by ~0.5 rad first).
+PLAN = (("forward", 12.0, 0.085, 0.0, 4.0), ("left", 20.0, 0.085, 0.1, 8.0),
+        ("right", 20.0, 0.085, -0.1, 8.0))
+STOP_S = 8.0
+#: A fresh graph: the first Twist at this sim time (the CPG has taken over the recording at ~6.6 s).
+START_S = 8.0
+RATE_HZ = 10.0
+
+
+def _yaw(q) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = False,
+                wall_limit_s: float = 1800.0) -> dict:
+    """Run the plan (module docstring) against a graph; write and return the measurements."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import Twist
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from cpg_walker.nodes.graph import isolated_env, quiet_domain_id
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    if attach and domain_id is None:
+        domain_id = int(os.environ.get("ROS_DOMAIN_ID", "0"))
+    domain = quiet_domain_id() if domain_id is None else int(domain_id)
+    total = sum(p[1] for p in PLAN) + STOP_S
+    proc = None
+    if not attach:
+        cmd = [sys.executable, "-m", "cpg_walker.cli.main", "graph", "--pacing", "lockstep", "--duration",
+               str(START_S + total), "--domain-id", str(domain), "--log-dir", str(out / "logs")]
+        proc = subprocess.Popen(cmd, env=isolated_env(domain), stdout=open(out / "graph.log", "w"),
+                                stderr=subprocess.STDOUT, start_new_session=True)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node("drive_check", context=ctx, start_parameter_services=False)
+    odom: list[tuple[float, float, float, float]] = []
+    cmd_state: list[tuple[float, str]] = []
+
+    def on_odom(m: Odometry) -> None:
+        p = m.pose.pose
+        odom.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, p.position.x, p.position.y,
+                     _yaw(p.orientation)))
+
+    def on_diag(m: DiagnosticArray) -> None:
+        for s in m.status:
+            if s.name == "cpg_walker/cpg":
+                v = {kv.key: kv.value for kv in s.values}
+                if "cmd_vel" in v:
+                    cmd_state.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, v["cmd_vel"]))
+
+    node.create_subscription(Odometry, "/odom/ground_truth", on_odom, 200)
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
+    pub = node.create_publisher(Twist, "/cmd_vel", 10)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    sent: list[tuple[float, float, float]] = []
+    t0 = None
+    end_wall = time.monotonic() + wall_limit_s
+    next_pub = 0.0
+    last_report = 0.0
+    try:
+        while time.monotonic() < end_wall:
+            executor.spin_once(timeout_sec=0.01)
+            if proc is not None and proc.poll() is not None:
+                break
+            if not odom:
+                continue
+            t = odom[-1][0]
+            if t0 is None:
+                t0 = max(START_S, t + 1.0) if not attach else t + 1.0
+                next_pub = t0
+            if t >= t0 + total:
+                break
+            if t >= next_pub:
+                seg = _segment(t - t0)
+                if seg is not None:
+                    msg = Twist()
+                    msg.linear.x, msg.angular.z = seg[2], seg[3]
+                    pub.publish(msg)
+                    sent.append((round(t, 3), seg[2], seg[3]))
+                next_pub += 1.0 / RATE_HZ
+            if time.monotonic() - last_report > 5.0:
+                print(f"drive-check --graph: sim {t:.1f} / {t0 + total:.1f} s", file=sys.stderr, flush=True)
+                last_report = time.monotonic()
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        if proc is not None:
+            if proc.poll() is None:
+                import signal
+
+                os.killpg(proc.pid, signal.SIGINT)
+                try:
+                    proc.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                    proc.wait()
+    if t0 is None or not sent:
+        raise RuntimeError(f"no /odom/ground_truth from the graph on domain {domain} (see {out}/graph.log)")
+    res = measure(np.array(odom), t0, sent, cmd_state)
+    res.update(domain_id=domain, attached=attach, plan=[list(p) for p in PLAN], stop_s=STOP_S,
+               first_command_s=t0)
+    (out / "drive_graph.json").write_text(json.dumps(res, indent=2) + "\n")
+    (out / "drive_graph.md").write_text(markdown(res))
+    return res
+
+
+def _segment(dt: float):
+    t = 0.0
+    for p in PLAN:
+        if t <= dt < t + p[1]:
+            return p
+        t += p[1]
+    return None
+
+
+def measure(odom: np.ndarray, t0: float, sent: list, cmd_state: list) -> dict:
+    """Per plan window (after SETTLE_S): forward speed, turn rate; the stop after the last command."""
+    t, xy, yaw = odom[:, 0], odom[:, 1:3], np.unwrap(odom[:, 3])
+    rows = []
+    start = t0
+    for name, dur, vx, wz, settle in PLAN:
+        a, b = start + settle, start + dur
+        sel = (t >= a) & (t <= b)
+        rate = float(np.polyfit(t[sel], yaw[sel], 1)[0]) if sel.sum() > 10 else float("nan")
+        fwd = 0.0
+        edges = np.arange(a, b + 1e-9, 1.0)
+        for c0, c1 in itertools.pairwise(edges):
+            i0, i1 = np.searchsorted(t, c0), min(np.searchsorted(t, c1), len(t) - 1)
+            h = float(np.mean(yaw[i0:i1 + 1]))
+            fwd += float((xy[i1] - xy[i0]) @ [math.cos(h), math.sin(h)])
+        span = float(edges[-1] - edges[0])
+        rows.append({"window": name, "from_s": round(a, 2), "to_s": round(b, 2), "linear_x": vx,
+                     "angular_z": wz, "speed_mps": round(fwd / span, 4), "turn_rate_rad_s": round(rate, 4),
+                     "turn_rate_deg_s": round(math.degrees(rate), 2)})
+        start += dur
+    t_last = sent[-1][0]
+    stopped = None
+    for s in np.arange(t_last, t[-1] - 1.0, 0.1):
+        i0, i1 = np.searchsorted(t, s), min(np.searchsorted(t, s + 1.0), len(t) - 1)
+        if float(np.linalg.norm(xy[i1] - xy[i0])) < 0.01:
+            stopped = float(s)
+            break
+    timed_out = next((ts for ts, st in cmd_state if ts > t_last and st == "timed_out"), None)
+    return {"windows": rows, "last_command_s": t_last, "commands_sent": len(sent),
+            "stopped_after_s": None if stopped is None else round(stopped - t_last, 2),
+            "timed_out_after_s": None if timed_out is None else round(timed_out - t_last, 3),
+            "end_s": round(float(t[-1]), 2)}
+
+
+def markdown(res: dict) -> str:
+    lines = ["| window (sim s) | linear.x | angular.z | forward speed m/s | turn rate rad/s (°/s) |",
+             "|---|---|---|---|---|"]
+    for w in res["windows"]:
+        lines.append(f"| {w['window']} {w['from_s']:g}–{w['to_s']:g} | {w['linear_x']:+g} | "
+                     f"{w['angular_z']:+g} | {w['speed_mps']:+.3f} | {w['turn_rate_rad_s']:+.3f} "
+                     f"({w['turn_rate_deg_s']:+.1f}) |")
+    lines.append("")
+    lines.append(f"Last command at sim {res['last_command_s']:.2f} s; cpg_node timed out "
+                 f"{res['timed_out_after_s']} s after it; the base moved < 1 cm/s from "
+                 f"{res['stopped_after_s']} s after it.")
+    return "\n".join(lines) + "\n"

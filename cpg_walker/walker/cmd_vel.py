@@ -1,0 +1,362 @@
+"""/cmd_vel (geometry_msgs/Twist) for the walking HOAP-2, without ROS: linear.x -> (ζ, α), angular.z ->
+the heading pathway's turn rate, a command timeout, and direction changes.
+
+* ``SpeedMap`` — the forward speed measured per ζ (α = 1) and per α at ζ = ±``slow_abs_zeta``, forward and
+  backward (config/speed_map.yaml, which says how it was measured). Its inverse: |v| at or above the
+  speed of ζ = ±1 (α = 1) -> ζ by monotone interpolation of the measured speeds at α = 1 (up to the
+  fastest walkable ζ); below it -> α by interpolation of the measured speeds at ζ = ±1 (shorter steps at
+  the learned rhythm; speed ≈ linear in α). Slower ζ than 1 are measured and recorded but not used:
+  ζ 0.7 walks but 0.6 falls, and reversing into ζ −0.6 … −0.8 falls (README, "Our pathways"), while
+  α 0.2 … 1 at ζ ±1 walks. Continuous in v (the branches meet at ζ = ±1, α = 1).
+* ``CmdVelFollower`` — a small state machine on sim time: ``command(t, linear_x, angular_z)`` and
+  ``update(t, applied_zeta, applied_alpha)`` -> ``CmdVelOutput`` (ζ, α, turn rate to command). States:
+  ``waiting`` (no command yet: None, the node keeps its parameters' ζ/α), ``following``, ``standing``
+  (|linear.x| below ``stand_below``: α -> 0, the robot stands), ``reversing`` (the sign of linear.x flipped
+  while stepping: α -> 0 first, ζ swapped once the applied α is below REVERSE_ALPHA, α back once the
+  applied ζ is within REVERSE_ZETA_TOLERANCE of the new one), ``ramping`` (after a reversal the α command
+  rises at most REVERSE_ALPHA_RATE per sim s: measured safer, README), ``timed_out`` (no command for
+  ``timeout`` sim s: α -> 0, turn 0, like diff_drive_controller's cmd_vel_timeout; the next command
+  resumes). α -> 0 is smooth: HumanoidCPG's cascaded ζ/α command filter (3 × 0.25 s lags).
+* Turning: angular.z (clamped to ±``max_angular_z``) is FeedbackController.set_turn_rate: the heading
+  reference advances at that rate. Anti-windup: ``apply_output`` sets the controller's
+  ``heading_window_rad`` (|reference − yaw| ≤ the error that saturates heading_limit_rad) while turning,
+  and when the turn command returns to 0 it takes the walked heading (the reference minus the filtered
+  error: the stride-mean yaw) as the new reference (``hold_heading``), so the robot keeps its new
+  heading instead of turning on through the lag that built up.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+#: keys of a CmdVelLimits (and of cpg_node's ``cmd_vel.<key>`` parameters)
+LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand_below")
+
+
+def _read_yaml(path: str | Path | None, default: str) -> tuple[dict, Path]:
+    import yaml
+
+    from cpg_walker.paths import config_path
+
+    p = Path(path) if path else config_path(default)
+    if not p.is_file() and path and not Path(path).is_absolute():
+        try:
+            p = config_path(str(path))
+        except FileNotFoundError:
+            pass
+    if not p.is_file():
+        raise FileNotFoundError(f"speed map file not found: {path}")
+    with open(p, encoding="utf-8") as fh:
+        d = yaml.safe_load(fh) or {}
+    if not isinstance(d, dict):
+        raise ValueError(f"{p}: expected a mapping")
+    return d, p
+
+
+def _pairs(d: dict, key: str, where: str) -> np.ndarray:
+    v = d.get(key)
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}.{key}: expected a list of [x, speed] pairs, got {v!r}") from None
+    if a.ndim != 2 or a.shape[1] != 2 or len(a) < 1 or not np.all(np.isfinite(a)):
+        raise ValueError(f"{where}.{key}: expected a non-empty list of finite [x, speed] pairs, got {v!r}")
+    return a[np.argsort(np.abs(a[:, 0]))]
+
+
+def monotone(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The least-squares non-decreasing fit of y over sorted x (pool adjacent violators), with every
+    pooled block merged into one point (mean x, pooled y): strictly increasing in both."""
+    blocks: list[list[float]] = []  # [sum x, sum y, n]
+    for xi, yi in zip(x, y, strict=True):
+        blocks.append([float(xi), float(yi), 1.0])
+        while len(blocks) > 1 and blocks[-2][1] / blocks[-2][2] >= blocks[-1][1] / blocks[-1][2]:
+            last = blocks.pop()
+            blocks[-1] = [blocks[-1][0] + last[0], blocks[-1][1] + last[1], blocks[-1][2] + last[2]]
+    return (np.array([b[0] / b[2] for b in blocks]), np.array([b[1] / b[2] for b in blocks]))
+
+
+@dataclass(frozen=True)
+class Branch:
+    """One walking direction (``sign`` ±1) as one chain of "effort" c, s = slow_abs_zeta: c < s ->
+    (ζ = ±s, α = c / s), c >= s -> (ζ = ±c, α = 1), continuous at c = s. ``c`` and ``speed`` (|v|)
+    strictly increasing (the measured points made monotone by ``monotone``)."""
+
+    sign: float
+    slow: float
+    c: np.ndarray
+    speed: np.ndarray
+
+    @property
+    def v_min(self) -> float:
+        return float(self.speed[0])
+
+    @property
+    def v_max(self) -> float:
+        return float(self.speed[-1])
+
+    def modulation(self, c: float) -> tuple[float, float]:
+        """(ζ, α) of effort c."""
+        if c >= self.slow:
+            return self.sign * c, 1.0
+        return self.sign * self.slow, c / self.slow
+
+    def inverse(self, speed: float) -> tuple[float, float]:
+        """(ζ, α) for |v| = ``speed``, clamped to [v_min, v_max]."""
+        s = min(max(abs(speed), self.v_min), self.v_max)
+        return self.modulation(float(np.interp(s, self.speed, self.c)))
+
+    def speed_at(self, zeta: float, alpha: float) -> float:
+        """The map's signed speed at (ζ, α) (α < 1 only at the slow ζ)."""
+        c = alpha * self.slow if alpha < 1.0 else abs(zeta)
+        return self.sign * float(np.interp(c, self.c, self.speed))
+
+
+class SpeedMap:
+    """Measured speed vs (ζ, α) and its inverse (module docstring). ``load(path)``: a YAML with
+    ``slow_abs_zeta`` and ``forward`` / ``backward`` mappings of ``zeta_speed`` ([ζ, m/s] at α = 1) and
+    ``alpha_speed`` ([α, m/s] at ζ = ±slow_abs_zeta); anything else (how it was measured) is kept as
+    ``meta``. The measured points are made monotone (``monotone``: measurement noise can make ζ 1.4
+    slower than 1.3); bad data (wrong signs, ζ = ±slow_abs_zeta missing) raise ValueError naming the file
+    and key."""
+
+    def __init__(self, data: dict, origin: str = "<dict>"):
+        self.origin = origin
+        slow = data.get("slow_abs_zeta", 1.0)
+        if isinstance(slow, bool) or not isinstance(slow, (int, float)) or not (0 < slow <= 2):
+            raise ValueError(f"{origin}: slow_abs_zeta must be in (0, 2], got {slow!r}")
+        self.slow_abs_zeta = float(slow)
+        self.meta = {k: v for k, v in data.items() if k not in ("slow_abs_zeta", "forward", "backward")}
+        self.forward = self._branch(data, "forward", 1.0)
+        self.backward = self._branch(data, "backward", -1.0)
+
+    def _branch(self, data: dict, key: str, sign: float) -> Branch:
+        where = f"{self.origin}: {key}"
+        d = data.get(key)
+        if not isinstance(d, dict):
+            raise ValueError(f"{where}: missing (a mapping with zeta_speed and alpha_speed)")
+        z, a = _pairs(d, "zeta_speed", where), _pairs(d, "alpha_speed", where)
+        rel = "> 0" if sign > 0 else "< 0"
+        if np.any(np.sign(z[:, 0]) != sign) or np.any(np.sign(z[:, 1]) != sign):
+            raise ValueError(f"{where}.zeta_speed: every zeta and speed must be {rel}")
+        if np.any(np.sign(a[:, 1]) != sign) or np.any(a[:, 0] <= 0) or np.any(a[:, 0] >= 1):
+            raise ValueError(f"{where}.alpha_speed: alpha in (0, 1), speeds {rel}")
+        s = self.slow_abs_zeta
+        z = z[np.abs(z[:, 0]) >= s - 1e-9]
+        if len(z) < 1 or abs(abs(z[0, 0]) - s) > 1e-9:
+            raise ValueError(f"{where}.zeta_speed: needs the point at zeta = {sign * s:g}")
+        c = np.concatenate([a[:, 0] * s, np.abs(z[:, 0])])
+        c, v = monotone(c, np.abs(np.concatenate([a[:, 1], z[:, 1]])))
+        return Branch(sign, s, c, v)
+
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> SpeedMap:
+        """The map in ``path`` (a file, or a name in the package's config/; None: config/speed_map.yaml)."""
+        d, p = _read_yaml(path, "speed_map.yaml")
+        return cls(d, str(p))
+
+    @property
+    def v_max(self) -> float:
+        """Fastest forward speed (m/s)."""
+        return self.forward.v_max
+
+    @property
+    def v_min(self) -> float:
+        """Fastest backward speed (m/s, negative)."""
+        return -self.backward.v_max
+
+    def inverse(self, v: float) -> tuple[float, float]:
+        """(ζ, α) of the signed speed v != 0 (m/s), clamped to the walkable range of its direction."""
+        if not math.isfinite(v) or v == 0:
+            raise ValueError(f"speed map inverse needs a finite non-zero speed, got {v}")
+        return (self.forward if v > 0 else self.backward).inverse(v)
+
+    def speed(self, zeta: float, alpha: float = 1.0) -> float:
+        """The map's speed (m/s) at (ζ, α)."""
+        return (self.forward if zeta > 0 else self.backward).speed_at(zeta, alpha)
+
+    def command(self, linear_x: float, limits: CmdVelLimits) -> tuple[float, float]:
+        """(ζ, α) for a linear.x: clamped to the limits, |v| < stand_below -> (1 or −1 by sign, 0)."""
+        v = limits.clamp_linear(linear_x)
+        if abs(v) < limits.stand_below:
+            return (math.copysign(self.slow_abs_zeta, v) if v else self.slow_abs_zeta), 0.0
+        return self.inverse(v)
+
+
+@dataclass(frozen=True)
+class CmdVelLimits:
+    """The /cmd_vel limits (cpg_node's ``cmd_vel.*`` parameters; defaults in config/cpg.yaml):
+    ``timeout`` sim s, linear.x in [min_linear_x, max_linear_x] m/s, |angular.z| <= max_angular_z rad/s,
+    |linear.x| < stand_below -> stand (α 0)."""
+
+    timeout: float
+    max_linear_x: float
+    min_linear_x: float
+    max_angular_z: float
+    stand_below: float
+
+    def __post_init__(self) -> None:
+        for k in LIMIT_KEYS:
+            v = getattr(self, k)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"cmd_vel.{k} must be a finite number, got {v!r}")
+        if not self.timeout > 0:
+            raise ValueError(f"cmd_vel.timeout must be > 0 s, got {self.timeout}")
+        if not self.max_linear_x >= 0 or not self.min_linear_x <= 0:
+            raise ValueError(f"cmd_vel.max_linear_x must be >= 0 and cmd_vel.min_linear_x <= 0, got "
+                             f"{self.max_linear_x} / {self.min_linear_x}")
+        if not 0 <= self.max_angular_z <= 1.0:
+            raise ValueError(f"cmd_vel.max_angular_z must be in [0, 1] rad/s, got {self.max_angular_z}")
+        if not self.stand_below >= 0:
+            raise ValueError(f"cmd_vel.stand_below must be >= 0, got {self.stand_below}")
+
+    @classmethod
+    def load(cls, path: str | Path | None = None, **overrides: float) -> CmdVelLimits:
+        """From cpg_node's parameters file (config/cpg.yaml: ``cmd_vel.<key>``), with overrides."""
+        from cpg_walker.paths import config_path, ros_parameters
+
+        p = ros_parameters(path or config_path("cpg.yaml"), "cpg")
+        d = {k: p.get(f"cmd_vel.{k}") for k in LIMIT_KEYS}
+        d.update(overrides)
+        missing = [k for k, v in d.items() if v is None]
+        if missing:
+            raise ValueError(f"cmd_vel limits: missing {missing} in {path or 'config/cpg.yaml'}")
+        return cls(**{k: float(v) for k, v in d.items()})
+
+    def clamp_linear(self, v: float) -> float:
+        return min(max(float(v), self.min_linear_x), self.max_linear_x)
+
+    def clamp_angular(self, w: float) -> float:
+        return min(max(float(w), -self.max_angular_z), self.max_angular_z)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def check_twist(linear_x: float, angular_z: float, others: tuple[float, ...] = ()) -> None:
+    """ValueError with the reason for a Twist the robot must not follow: non-finite components (the
+    unused ones, ``others``, too: a NaN anywhere says the sender is broken)."""
+    for name, v in (("linear.x", linear_x), ("angular.z", angular_z)):
+        if not math.isfinite(v):
+            raise ValueError(f"non-finite {name} ({v})")
+    if not all(math.isfinite(v) for v in others):
+        raise ValueError("non-finite linear.y/z or angular.x/y")
+
+
+@dataclass(frozen=True)
+class CmdVelOutput:
+    """What to command now: ζ, α (HumanoidCPG.set_zeta/set_alpha), turn rate (rad/s) and the state."""
+
+    zeta: float
+    alpha: float
+    turn_rate: float
+    state: str
+
+
+#: Reversal: α command 0 until the applied α is below this, ...
+REVERSE_ALPHA = 0.05
+#: ... then the new ζ, α 0 until the applied ζ is this close (fraction of |new ζ|) to it, ...
+REVERSE_ZETA_TOLERANCE = 0.1
+#: ... then the α command rises at most this fast (per sim s; measured: README "Driving with /cmd_vel").
+REVERSE_ALPHA_RATE = 0.05
+
+
+class CmdVelFollower:
+    """Twist commands -> (ζ, α, turn rate) over sim time (module docstring). ``zeta``: the ζ commanded
+    before the first Twist (its sign is the current walking direction)."""
+
+    def __init__(self, speed_map: SpeedMap, limits: CmdVelLimits, zeta: float = 1.0):
+        self.map, self.limits = speed_map, limits
+        self.zeta = float(zeta) if zeta else 1.0  # the ζ commanded (direction: its sign)
+        self.state = "waiting"
+        self.last: tuple[float, float, float] | None = None  # (t, linear.x, angular.z) as received
+        self.target: tuple[float, float, float] = (self.zeta, 0.0, 0.0)
+        self._reversing = False  # direction swapped, waiting for the applied ζ
+        self.reverse_via_stop = True  # False: flip ζ at once (measured against; README)
+        self.alpha_rate: float | None = None  # limit on every rise of the α command (per sim s); None: none
+        self.reverse_alpha_rate: float | None = REVERSE_ALPHA_RATE  # ... after a reversal
+        self._ramp = False
+        self._t_prev, self._alpha_out = 0.0, 1.0
+
+    def set_limits(self, limits: CmdVelLimits) -> None:
+        self.limits = limits
+        if self.last is not None:
+            self._retarget()
+
+    def command(self, t: float, linear_x: float, angular_z: float) -> CmdVelOutput | None:
+        """A Twist at sim time t (ValueError for a bad one: nothing changes)."""
+        check_twist(linear_x, angular_z)
+        if not math.isfinite(t):
+            raise ValueError(f"non-finite command time {t}")
+        self.last = (float(t), float(linear_x), float(angular_z))
+        self._retarget()
+        return None
+
+    def _retarget(self) -> None:
+        _, vx, wz = self.last  # type: ignore[misc]
+        z, a = self.map.command(vx, self.limits)
+        if a == 0.0:
+            z = self.zeta  # standing: keep the walking direction
+        self.target = (z, a, self.limits.clamp_angular(wz) if a > 0 else 0.0)
+
+    def update(self, t: float, applied_zeta: float, applied_alpha: float) -> CmdVelOutput | None:
+        """What to command at sim time t, given the controller's applied (filtered) ζ and α; None while
+        no Twist has come."""
+        if self.last is None:
+            return None
+        if t - self.last[0] > self.limits.timeout:
+            self.state = "timed_out"
+            return self._out(t, self.zeta, 0.0, 0.0)
+        z, a, w = self.target
+        if a == 0.0:
+            self.state = "standing"
+            return self._out(t, self.zeta, 0.0, 0.0)
+        if math.copysign(1.0, z) != math.copysign(1.0, self.zeta) and self.reverse_via_stop:  # flips
+            if applied_alpha > REVERSE_ALPHA:
+                self.state = "reversing"  # stop stepping first
+                return self._out(t, self.zeta, 0.0, 0.0)
+            self.zeta, self._reversing = z, True  # stepping has stopped: swap the direction
+        if self._reversing:
+            if abs(applied_zeta - z) > REVERSE_ZETA_TOLERANCE * abs(z):
+                self.state = "reversing"  # the new ζ first, then step again
+                return self._out(t, z, 0.0, 0.0)
+            self._reversing, self._ramp = False, True
+        self.zeta = z
+        self.state = "following"
+        rate = self.alpha_rate
+        if rate is None and self._ramp:
+            rate = self.reverse_alpha_rate
+        if rate is not None:  # the α command rises at most ``rate`` per sim s
+            ramped = self._alpha_out + rate * max(t - self._t_prev, 0.0)
+            if ramped < a:
+                a = ramped
+                self.state = "ramping"
+            else:
+                self._ramp = False
+        return self._out(t, z, a, w)
+
+    def _out(self, t: float, z: float, a: float, w: float) -> CmdVelOutput:
+        self._t_prev, self._alpha_out = t, a
+        return CmdVelOutput(z, a, w, self.state)
+
+
+def apply_output(ctrl, fb, out: CmdVelOutput) -> None:
+    """Command ``out`` to a HumanoidCPG and a FeedbackController (None: no turning possible), with the
+    heading anti-windup (module docstring)."""
+    if ctrl.zeta_command != out.zeta:
+        ctrl.set_zeta(out.zeta)
+    if ctrl.alpha_command != out.alpha:
+        ctrl.set_alpha(out.alpha)
+    if fb is None:
+        return
+    if out.turn_rate != 0.0:
+        cfg = fb.cfg
+        fb.heading_window_rad = cfg.heading_limit_rad / cfg.heading_gain if cfg.heading_gain > 0 else 0.0
+    elif fb.turn_rate != 0.0:
+        fb.hold_heading()
+    if fb.turn_rate != out.turn_rate:
+        fb.set_turn_rate(out.turn_rate)

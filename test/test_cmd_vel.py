@@ -1,0 +1,240 @@
+"""/cmd_vel's pure core (walker/cmd_vel.py): the speed map's inverse and its monotone fit, the limits, the
+follower's states (following, standing, timeout and resume, reversal through α = 0), bad input, and the
+heading anti-windup of the feedback controller."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cpg_walker.walker.cmd_vel import (
+    REVERSE_ALPHA,
+    REVERSE_ALPHA_RATE,
+    CmdVelFollower,
+    CmdVelLimits,
+    CmdVelOutput,
+    SpeedMap,
+    apply_output,
+    check_twist,
+    monotone,
+)
+from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
+
+
+def limits(**kw) -> CmdVelLimits:
+    base = {"timeout": 0.5, "max_linear_x": 0.11, "min_linear_x": -0.1, "max_angular_z": 0.15,
+            "stand_below": 0.005}
+    return CmdVelLimits(**{**base, **kw})
+
+
+def toy_map(**over) -> dict:
+    d = {"slow_abs_zeta": 1.0,
+         "forward": {"zeta_speed": [[0.7, 0.05], [1.0, 0.08], [1.2, 0.1], [1.4, 0.095], [1.5, 0.11]],
+                     "alpha_speed": [[0.4, 0.03], [0.8, 0.065]]},
+         "backward": {"zeta_speed": [[-1.0, -0.09], [-1.5, -0.105]],
+                      "alpha_speed": [[0.5, -0.04]]}}
+    d.update(over)
+    return d
+
+
+def test_packaged_map_inverse_round_trips_and_is_monotone():
+    """config/speed_map.yaml: the inverse of the map's own speeds gives back (ζ, α); |v| at or above the
+    ζ = 1 speed is reached through ζ at α 1, below it through α at ζ 1; ζ and α rise with |v|."""
+    m = SpeedMap.load()
+    lim = CmdVelLimits.load()
+    for branch, sign in ((m.forward, 1.0), (m.backward, -1.0)):
+        for c, v in zip(branch.c, branch.speed, strict=True):
+            z, a = m.inverse(sign * v)
+            assert (z, a) == pytest.approx(branch.modulation(c))
+            assert m.speed(z, a) == pytest.approx(sign * v)
+        vs = np.linspace(branch.v_min, branch.v_max, 200)
+        za = np.array([m.inverse(sign * v) for v in vs])
+        assert np.all(np.diff(np.abs(za[:, 0])) >= -1e-12) and np.all(np.diff(za[:, 1]) >= -1e-12)
+        assert np.all(np.sign(za[:, 0]) == sign)
+        fast = vs >= branch.speed[list(branch.c).index(1.0)]
+        assert np.all(za[fast, 1] == 1.0) and np.all(np.abs(za[~fast, 0]) == 1.0)
+    # the limits are what the map reaches
+    assert lim.max_linear_x == pytest.approx(m.v_max, abs=1e-3)
+    assert lim.min_linear_x == pytest.approx(m.v_min, abs=1e-3)
+
+
+def test_map_clamps_and_stands():
+    m = SpeedMap(toy_map())
+    lim = limits()
+    assert m.command(0.5, lim) == m.inverse(0.11) == pytest.approx((1.5, 1.0))  # above max: the fastest
+    assert m.command(-0.5, lim) == pytest.approx(m.inverse(-0.1))  # min_linear_x
+    assert m.inverse(0.001) == pytest.approx((1.0, 0.4))  # below the slowest walk: the slowest walk
+    assert m.command(0.004, lim) == (1.0, 0.0)  # below stand_below: stand
+    assert m.command(-0.004, lim) == (-1.0, 0.0)
+    assert m.command(0.0, lim)[1] == 0.0
+    assert m.inverse(0.08) == pytest.approx((1.0, 1.0))  # the two branches meet at ζ 1, α 1
+    assert m.inverse(0.0799)[0] == 1.0 and m.inverse(0.0799)[1] == pytest.approx(1.0, abs=0.01)
+    assert m.inverse(-0.04) == pytest.approx((-1.0, 0.5))
+
+
+def test_noisy_points_are_pooled_into_a_monotone_map():
+    """ζ 1.4 measured slower than 1.2: pooled (mean ζ 1.3, mean speed); ζ below slow_abs_zeta unused."""
+    x, y = monotone(np.array([1.0, 1.2, 1.4, 1.5]), np.array([0.08, 0.1, 0.095, 0.11]))
+    assert x.tolist() == pytest.approx([1.0, 1.3, 1.5]) and y.tolist() == pytest.approx([0.08, 0.0975, 0.11])
+    m = SpeedMap(toy_map())
+    assert m.forward.c.tolist() == pytest.approx([0.4, 0.8, 1.0, 1.3, 1.5])
+    assert np.all(np.diff(m.forward.speed) > 0)
+
+
+@pytest.mark.parametrize("change, why", [
+    ({"forward": {"zeta_speed": [[1.0, 0.08]], "alpha_speed": [[0.5, -0.04]]}}, "forward.alpha_speed"),
+    ({"backward": {"zeta_speed": [[-1.0, 0.09]], "alpha_speed": [[0.5, -0.04]]}}, "backward.zeta_speed"),
+    ({"forward": {"zeta_speed": [[1.2, 0.1]], "alpha_speed": [[0.5, 0.04]]}}, "zeta = 1"),
+    ({"forward": {"zeta_speed": [[1.0, math.nan]], "alpha_speed": [[0.5, 0.04]]}}, "finite"),
+    ({"forward": {"zeta_speed": "fast", "alpha_speed": [[0.5, 0.04]]}}, "zeta_speed"),
+    ({"forward": None}, "forward: missing"),
+    ({"slow_abs_zeta": 3.0}, "slow_abs_zeta"),
+])
+def test_bad_map_data_is_refused_naming_the_key(change, why):
+    with pytest.raises(ValueError, match=why):
+        SpeedMap(toy_map(**change), "map.yaml")
+
+
+def test_limits_are_validated():
+    for kw, why in (({"timeout": 0.0}, "timeout"), ({"timeout": math.nan}, "finite"),
+                    ({"max_linear_x": -0.1}, "max_linear_x"), ({"min_linear_x": 0.1}, "min_linear_x"),
+                    ({"max_angular_z": 2.0}, "max_angular_z"), ({"stand_below": -1.0}, "stand_below")):
+        with pytest.raises(ValueError, match=why):
+            limits(**kw)
+    lim = limits()
+    assert lim.clamp_angular(1.0) == 0.15 and lim.clamp_angular(-1.0) == -0.15
+    assert lim.clamp_linear(0.05) == 0.05
+
+
+def test_follower_follows_times_out_and_resumes():
+    m = SpeedMap(toy_map())
+    f = CmdVelFollower(m, limits(), zeta=1.0)
+    assert f.update(0.0, 1.0, 1.0) is None and f.state == "waiting"  # nothing before the first message
+    f.command(10.0, 0.1, 0.05)
+    out = f.update(10.002, 1.0, 1.0)
+    assert out == CmdVelOutput(m.inverse(0.1)[0], 1.0, 0.05, "following")
+    assert f.update(10.5, 1.1, 1.0).state == "following"  # exactly the timeout: still following
+    out = f.update(10.502, 1.1, 1.0)
+    assert out == CmdVelOutput(m.inverse(0.1)[0], 0.0, 0.0, "timed_out")  # stop stepping, keep ζ
+    f.command(12.0, 0.03, 0.0)  # resumes (same direction: no reversal)
+    out = f.update(12.002, 1.2, 0.1)
+    assert out.state == "following" and out == CmdVelOutput(1.0, pytest.approx(0.4), 0.0, "following")
+    f.command(12.1, 0.0, 0.1)  # zero speed: stand (no turning without steps), keep the direction
+    assert f.update(12.102, 1.0, 0.4) == CmdVelOutput(1.0, 0.0, 0.0, "standing")
+    f.command(12.2, 0.2, 1.0)  # clamped to the limits
+    assert f.update(12.202, 1.0, 0.0) == CmdVelOutput(1.5, 1.0, 0.15, "following")
+
+
+def test_reversal_stops_stepping_before_the_zeta_sign_flips():
+    """Forward -> backward: α 0 with the old ζ until the applied α < REVERSE_ALPHA, then the new ζ with α 0
+    until the applied ζ is near it, then step with α rising at REVERSE_ALPHA_RATE; no ζ of the new sign
+    is commanded while α is applied."""
+    m = SpeedMap(toy_map())
+    f = CmdVelFollower(m, limits(), zeta=1.0)
+    f.command(0.0, 0.08, 0.0)
+    assert f.update(0.0, 1.0, 1.0).state == "following"
+    f.command(1.0, -0.09, 0.1)
+    assert f.update(1.0, 1.0, 1.0) == CmdVelOutput(1.0, 0.0, 0.0, "reversing")
+    f.command(1.4, -0.09, 0.1)
+    assert f.update(1.4, 1.0, 2 * REVERSE_ALPHA) == CmdVelOutput(1.0, 0.0, 0.0, "reversing")
+    assert f.update(1.41, 1.0, REVERSE_ALPHA / 2) == CmdVelOutput(-1.0, 0.0, 0.0, "reversing")
+    assert f.update(1.42, 0.2, 0.01) == CmdVelOutput(-1.0, 0.0, 0.0, "reversing")  # ζ still on its way
+    out = f.update(1.43, -0.95, 0.01)  # stepping again, α rising at REVERSE_ALPHA_RATE per sim s
+    assert out == CmdVelOutput(-1.0, pytest.approx(REVERSE_ALPHA_RATE * 0.01), 0.1, "ramping")
+    t, alphas = 1.43, []
+    while out.state == "ramping":
+        t += 0.01
+        f.command(t, -0.09, 0.1)
+        out = f.update(t, -1.0, out.alpha)
+        alphas.append(out.alpha)
+    assert out == CmdVelOutput(-1.0, 1.0, 0.1, "following")
+    assert t - 1.43 == pytest.approx(1.0 / REVERSE_ALPHA_RATE, abs=0.02)
+    assert np.all(np.diff(alphas[:-1]) == pytest.approx(REVERSE_ALPHA_RATE * 0.01))
+    # from standing (α already 0): the swap is immediate, then the wait for ζ
+    f.command(1.5, 0.0, 0.0)
+    f.update(1.5, -1.0, 1.0)
+    f.command(1.9, 0.05, 0.0)
+    assert f.update(1.9, -1.0, 0.0) == CmdVelOutput(1.0, 0.0, 0.0, "reversing")
+
+
+def test_bad_twists_are_refused_and_change_nothing():
+    f = CmdVelFollower(SpeedMap(toy_map()), limits())
+    f.command(0.0, 0.08, 0.0)
+    before = f.update(0.1, 1.0, 1.0)
+    for vx, wz, why in ((math.nan, 0.0, "linear.x"), (0.05, math.inf, "angular.z"),
+                        (-math.inf, 0, "linear.x")):
+        with pytest.raises(ValueError, match=why):
+            f.command(0.2, vx, wz)
+    assert f.last == (0.0, 0.08, 0.0) and f.update(0.3, 1.0, 1.0) == before
+    with pytest.raises(ValueError, match=r"linear\.y/z or angular\.x/y"):
+        check_twist(0.0, 0.0, (0.0, math.nan, 0.0, 0.0))
+
+
+class FakeCPG:
+    def __init__(self):
+        self.zeta_command, self.alpha_command = 1.0, 1.0
+
+    def set_zeta(self, z):
+        self.zeta_command = z
+
+    def set_alpha(self, a):
+        self.alpha_command = a
+
+
+def _quat(yaw: float) -> np.ndarray:
+    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+
+
+def test_heading_anti_windup_and_hold():
+    """A robot that cannot follow the commanded turn (yaw held at 0): the reference stays within the
+    error that saturates the hip-yaw amplitude; once the turn command is 0 the walked heading becomes
+    the reference and u decays to 0 (the robot holds its heading), never turning on."""
+    cfg = FeedbackConfig.load()
+    fb = FeedbackController(cfg, ("heading",))
+    cpg = FakeCPG()
+    window = cfg.heading_limit_rad / cfg.heading_gain
+    dt = 0.01
+    t = 0.0
+    fb.observe(t, _quat(0.0), np.zeros(3), (10.0, 10.0))
+    fb.capture_heading()
+    apply_output(cpg, fb, CmdVelOutput(1.0, 1.0, 0.5, "following"))
+    for _ in range(1000):  # 10 s at 0.5 rad/s: 5 rad unbounded
+        t += dt
+        fb.observe(t, _quat(0.0), np.zeros(3), (10.0, 10.0))
+    assert fb.heading_ref == pytest.approx(window)
+    assert abs(fb.heading_amplitude()) == pytest.approx(cfg.heading_limit_rad, rel=1e-3)  # saturated
+    apply_output(cpg, fb, CmdVelOutput(1.0, 1.0, 0.0, "following"))
+    assert fb.turn_rate == 0.0
+    u = []
+    for _ in range(800):
+        t += dt
+        fb.observe(t, _quat(0.0), np.zeros(3), (10.0, 10.0))
+        u.append(fb.heading_amplitude())
+    u = np.abs(np.array(u))
+    assert np.all(np.diff(u) <= 1e-12) and u[-1] < 0.01 * cfg.heading_limit_rad
+    assert abs(fb.heading_ref) < 0.01 * window  # the walked heading (yaw 0), not the wound-up reference
+    # without anti-windup the same command winds the reference up without bound
+    free = FeedbackController(cfg, ("heading",))
+    free.observe(0.0, _quat(0.0), np.zeros(3), (10.0, 10.0))
+    free.capture_heading()
+    free.set_turn_rate(0.5)
+    for k in range(1, 1001):
+        free.observe(k * dt, _quat(0.0), np.zeros(3), (10.0, 10.0))
+    assert free.heading_ref == pytest.approx(5.0, rel=1e-6)
+
+
+def test_a_twist_drives_the_in_process_robot_and_the_timeout_stops_it():
+    """The follower as cpg_node applies it, on the simulated robot (experiments/cmd_vel.py run_drive):
+    0.06 m/s with a 0.1 rad/s left turn from 10 s; the speed over 14.8-22 s is the command within 10 %,
+    the robot turns left, and after the last Twist (22 s) the timeout stops it: the base moves < 1 cm/s
+    within 2.5 s and stays upright."""
+    from cpg_walker.experiments.cmd_vel import Drive, run_drive
+
+    m = run_drive(Drive("t", ((22.0, 0.06, 0.1),), tail_s=5.0))
+    assert not m["fell"], m
+    (seg,) = m["segments"]
+    assert seg["speed_mps"] == pytest.approx(0.06, rel=0.1), seg
+    assert seg["turn_rate_rad_s"] > 0.02, seg
+    assert m["speed_below_1cm_s_after_s"] is not None and m["speed_below_1cm_s_after_s"] <= 2.5, m
