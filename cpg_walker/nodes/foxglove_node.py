@@ -1,0 +1,299 @@
+"""foxglove_node: a live view of the walking robot in Foxglove (``ros2 run cpg_walker foxglove_node``;
+``--foxglove`` on ``cpg-walker graph``, ``walk`` and ``demo`` starts it).
+
+It runs a foxglove-sdk WebSocket server (bound to 127.0.0.1 unless ``host`` says otherwise) and shows the
+graph's topics on it (channels and encodings: foxglove_view.py), at most ``display_rate`` times per wall
+second and only while a client is subscribed to a channel: the high-rate topics are taken best-effort and
+raw (no deserialization until a message is shown), so the bridge never holds back the sim, PID and CPG
+nodes; it runs in its own process at lowered priority (config/foxglove.yaml). Touchdowns are detected on
+every /foot_load sample. Foxglove's parameter panel gets and sets the forwarded parameters of the other
+nodes through their parameter services (foxglove_params.py).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import foxglove
+from diagnostic_msgs.msg import DiagnosticArray
+from foxglove.channels import FrameTransformsChannel, JointStatesChannel
+from foxglove.messages import (
+    FrameTransform,
+    FrameTransforms,
+    JointState,
+    JointStates,
+    Quaternion,
+    Timestamp,
+    Vector3,
+)
+from foxglove.websocket import Capability
+from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterEvent
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import JointState as RosJointState
+from std_msgs.msg import Float64MultiArray
+
+from cpg_walker.nodes.foxglove_params import ParameterForwarder
+from cpg_walker.nodes.foxglove_view import (
+    CONTACT_SCHEMA,
+    CPG_STATE_SCHEMA,
+    DIAGNOSTICS_SCHEMA,
+    READY,
+    STRING_SCHEMA,
+    TOUCHDOWN_SCHEMA,
+    Contacts,
+    Poser,
+    cpg_layout,
+    cpg_state,
+    diagnostics,
+    is_loopback,
+    stamp_dict,
+)
+from cpg_walker.nodes.messages import stamp_ns
+from cpg_walker.nodes.runtime import (
+    HotPath,
+    Throttle,
+    declare,
+    declare_scheduling,
+    exit_log,
+    float_param,
+    int_param,
+    parse_cli,
+    run_main,
+    str_param,
+    strs_param,
+)
+from cpg_walker.robot.urdf import read_urdf
+
+INTERFACE = """\
+subscribes: /joint_states, /joint_targets (sensor_msgs/JointState), /odom/ground_truth (nav_msgs/Odometry),
+  /foot_load/left and /foot_load/right (geometry_msgs/WrenchStamped) - best effort, raw; /cpg/state
+  (std_msgs/Float64MultiArray), /diagnostics (diagnostic_msgs/DiagnosticArray), /parameter_events
+serves (Foxglove WebSocket, ws://host:port): channels /tf (foxglove.FrameTransforms: odom -> base_link
+  and every link, posed from /joint_states + /odom/ground_truth), /joint_states and /joint_targets
+  (foxglove.JointStates), /cpg/state (JSON: per DOF name the oscillators' phase_rad, frequency_hz,
+  amplitude_rad and the target), /contact (JSON: sole loads, feet down, touchdown counts), /contact/touchdown
+  (JSON: one message per step), /diagnostics (JSON by status name), /robot_description (JSON
+  {"data": URDF}); the Parameters capability: the forwarded parameters as /<node>.<name> (get and set
+  through the node's parameter services) and /robot_description (read-only); the Time capability (sim time)
+calls: /<node>/get_parameters, /<node>/set_parameters of the forwarded parameters' nodes
+parameters: host, port (0 = any free port, logged), display_rate (Hz, wall clock), service_timeout (wall s),
+  parameters (forwarded, NODE.NAME), realtime_priority, nice, cpu_affinity (OS scheduling)"""
+
+BEST_EFFORT = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+#: Wall s between services of the executor (/cpg/state, /diagnostics, parameter answers).
+SLOW_PERIOD_S = 0.01
+
+
+class FoxgloveNode(Node):
+    """The bridge: ROS subscriptions in, Foxglove channels out; ``display()`` shows the newest state."""
+
+    def __init__(self, **node_options) -> None:
+        super().__init__("foxglove", **node_options)
+        host = str(declare(self, "host", str_param(
+            "address the WebSocket server binds to (127.0.0.1: this machine only; 0.0.0.0: every interface)",
+            read_only=True)))
+        port = int(declare(self, "port", int_param("TCP port of the WebSocket server (0 = any free port)",
+                                                   0, 65535, read_only=True)))
+        self.display_period = 1.0 / float(declare(self, "display_rate", float_param(
+            "most messages per wall second on each high-rate channel", 1.0, 500.0, read_only=True)))
+        timeout = float(declare(self, "service_timeout", float_param(
+            "wall s to wait for a node's parameter service before answering Foxglove without it", 0.1, 60.0,
+            read_only=True)))
+        targets = list(declare(self, "parameters", strs_param(
+            "parameters of other nodes shown in Foxglove's parameter panel, NODE.NAME (e.g. cpg.zeta)",
+            read_only=True)) or [])
+        self.scheduling = declare_scheduling(self)
+        if not host:
+            raise ValueError("host must not be empty (127.0.0.1: this machine only)")
+
+        self.ctx = foxglove.Context()
+        self.urdf = read_urdf()
+        self.ch_tf = FrameTransformsChannel("/tf", context=self.ctx)
+        self.ch_js = JointStatesChannel("/joint_states", context=self.ctx)
+        self.ch_jt = JointStatesChannel("/joint_targets", context=self.ctx)
+        self.ch_cpg = foxglove.Channel("/cpg/state", schema=CPG_STATE_SCHEMA, context=self.ctx)
+        self.ch_contact = foxglove.Channel("/contact", schema=CONTACT_SCHEMA, context=self.ctx)
+        self.ch_touchdown = foxglove.Channel("/contact/touchdown", schema=TOUCHDOWN_SCHEMA, context=self.ctx)
+        self.ch_diag = foxglove.Channel("/diagnostics", schema=DIAGNOSTICS_SCHEMA, context=self.ctx)
+        self.ch_desc = foxglove.Channel("/robot_description", schema=STRING_SCHEMA, context=self.ctx)
+        self.send_description = False
+
+        def subscribed(topic: str) -> None:  # an sdk thread: only a flag, the main loop sends it
+            if topic == "/robot_description":
+                self.send_description = True
+
+        self.params = ParameterForwarder(self, targets, {"/robot_description": self.urdf}, timeout,
+                                         subscribed)
+        try:
+            self.server = foxglove.start_server(
+                name="cpg_walker", host=host, port=port, context=self.ctx, server_listener=self.params,
+                capabilities=[Capability.Parameters, Capability.Time])
+        except Exception as exc:  # the sdk raises its own error types for a bind failure
+            raise ValueError(f"cannot start the Foxglove server on {host}:{port}: {exc}") from None
+        self.params.server = self.server
+
+        self.latest: dict[str, bytes] = {}
+        self.shown: dict[str, int] = {}
+        self.counts: dict[str, int] = {}
+        self.contacts = Contacts()
+        self.poser = Poser()
+        self.warn = Throttle(5.0)
+        hot = [self.create_subscription(cls, t, lambda b, t=t: self._keep(t, b), BEST_EFFORT, raw=True)
+               for cls, t in ((RosJointState, "/joint_states"), (RosJointState, "/joint_targets"),
+                              (Odometry, "/odom/ground_truth"))]
+        hot += [self.create_subscription(WrenchStamped, f"/foot_load/{s}", lambda b, s=s: self._load(s, b),
+                                         BEST_EFFORT, raw=True) for s in ("left", "right")]
+        self.hot = HotPath(self, hot)
+        self.create_subscription(Float64MultiArray, "/cpg/state", self._cpg_state, 10)
+        self.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
+        self.create_subscription(ParameterEvent, "/parameter_events", self._parameter_event, 50)
+        self.last_cpg = 0.0
+        where = ("bound to localhost only (--foxglove HOST:PORT for another interface)" if is_loopback(host)
+                 else f"listening on {host}: reachable from other machines")
+        self.get_logger().info(f"{READY} ws://{'127.0.0.1' if host in ('0.0.0.0', '::') else host}:"
+                               f"{self.server.port} in Foxglove (Open connection -> Foxglove WebSocket); "
+                               f"{where}; forwarding parameters {', '.join(self.params.targets) or 'none'}")
+
+    # ------------------------------------------------------------------ ROS side (main thread)
+    def _keep(self, topic: str, data: bytes) -> None:
+        self.latest[topic] = data
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+    def _load(self, side: str, data: bytes) -> None:
+        try:
+            msg = deserialize_message(data, WrenchStamped)
+            load = float(msg.wrench.force.z)
+            self.contacts.add(side, stamp_ns(msg), load if load == load else 0.0)
+        except Exception as exc:  # a malformed message: dropped
+            self._warn(f"/foot_load/{side}", exc)
+
+    def _warn(self, what: str, exc: Exception) -> None:
+        self.warn.warn(self, what, f"dropped a malformed {what} message: {exc}")
+
+    def _cpg_state(self, msg: Float64MultiArray) -> None:
+        now = time.monotonic()
+        if not self.ch_cpg.has_sinks() or now - self.last_cpg < self.display_period:
+            return
+        self.last_cpg = now
+        try:
+            names, n_osc = cpg_layout(msg.layout.dim)
+            t_ns = self.newest_stamp_ns()
+            self.ch_cpg.log(cpg_state(names, n_osc, msg.data, t_ns), log_time=t_ns)
+        except (ValueError, TypeError) as exc:
+            self._warn("/cpg/state", exc)
+
+    def _diagnostics(self, msg: DiagnosticArray) -> None:
+        if self.ch_diag.has_sinks():
+            t_ns = stamp_ns(msg)
+            self.ch_diag.log(diagnostics(msg.status, t_ns), log_time=t_ns)
+
+    def _parameter_event(self, msg: ParameterEvent) -> None:
+        changed = self.params.changed(msg.node.lstrip("/"), [*msg.new_parameters, *msg.changed_parameters])
+        if changed:
+            self.server.publish_parameter_values(changed)
+
+    def newest_stamp_ns(self) -> int:
+        return max(self.shown.get("/joint_states", 0), self.contacts.t_ns, 0)
+
+    # ------------------------------------------------------------------ what the clients see
+    def _joint_states(self, topic: str, channel) -> RosJointState | None:
+        data = self.latest.pop(topic, None)
+        if data is None:
+            return None
+        try:
+            msg = deserialize_message(data, RosJointState)
+        except Exception as exc:
+            self._warn(topic, exc)
+            return None
+        t_ns = stamp_ns(msg)
+        self.shown[topic] = t_ns
+        if channel.has_sinks():
+            n = len(msg.name)
+            pos, vel, eff = list(msg.position), list(msg.velocity), list(msg.effort)
+            joints = [JointState(name=msg.name[i], position=pos[i] if i < len(pos) else None,
+                                 velocity=vel[i] if i < len(vel) else None,
+                                 effort=eff[i] if i < len(eff) else None) for i in range(n)]
+            channel.log(JointStates(timestamp=Timestamp(**stamp_dict(t_ns)), joints=joints), log_time=t_ns)
+        return msg
+
+    def display(self) -> None:
+        """Show the newest joint states, targets, link transforms and contact state (each at most once per
+        display period; skipped while no client subscribes to it)."""
+        js = self._joint_states("/joint_states", self.ch_js)
+        self._joint_states("/joint_targets", self.ch_jt)
+        odom = self.latest.get("/odom/ground_truth")
+        if js is not None and odom is not None and self.ch_tf.has_sinks():
+            try:
+                o = deserialize_message(odom, Odometry).pose.pose
+                p, q = o.position, o.orientation
+                poses = self.poser.transforms((p.x, p.y, p.z), (q.w, q.x, q.y, q.z),
+                                              zip(js.name, js.position, strict=False))
+            except Exception as exc:
+                self._warn("/odom/ground_truth", exc)
+                poses = []
+            t_ns = stamp_ns(js)
+            stamp = Timestamp(**stamp_dict(t_ns))
+            self.ch_tf.log(FrameTransforms(transforms=[frame_transform(stamp, t) for t in poses]),
+                           log_time=t_ns)
+        if self.contacts.t_ns >= 0 and self.ch_contact.has_sinks():
+            self.ch_contact.log(self.contacts.state(), log_time=self.contacts.t_ns)
+        if self.send_description:
+            self.send_description = False
+            self.ch_desc.log({"data": self.urdf})
+        if js is not None:
+            self.server.broadcast_time(stamp_ns(js))
+
+    def flush_touchdowns(self) -> None:
+        """One /contact/touchdown message per detected step (never throttled: they are events)."""
+        events, self.contacts.touchdowns = self.contacts.touchdowns, []
+        for side, t_ns in events:
+            self.ch_touchdown.log({"timestamp": stamp_dict(t_ns), "side": side,
+                                   "count": len(self.contacts.detector.events[side])}, log_time=t_ns)
+
+    def on_exit(self) -> None:
+        self.server.stop()
+        exit_log(self, "stats " + json.dumps({"received": self.counts,
+                                              "touchdowns": self.contacts.detector.events}))
+
+
+def frame_transform(stamp: Timestamp, p) -> FrameTransform:
+    """A robot/frames.py Transform as Foxglove's FrameTransform."""
+    (x, y, z), (qw, qx, qy, qz) = p.translation.tolist(), p.quat_wxyz.tolist()
+    return FrameTransform(timestamp=stamp, parent_frame_id=p.parent, child_frame_id=p.child,
+                          translation=Vector3(x=x, y=y, z=z), rotation=Quaternion(x=qx, y=qy, z=qz, w=qw))
+
+
+def spin_bridge(node: FoxgloveNode) -> None:
+    """Take the high-rate messages as they come; the executor every SLOW_PERIOD_S; show the newest state
+    every display period."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    next_slow = next_display = 0.0
+    while rclpy.ok():
+        node.hot.poll(0.005)
+        now = time.monotonic()
+        if now >= next_slow:
+            executor.spin_once(timeout_sec=0.0)
+            node.flush_touchdowns()
+            next_slow = now + SLOW_PERIOD_S
+        if now >= next_display:
+            node.display()
+            next_display = max(next_display + node.display_period, now)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = parse_cli("foxglove_node", "A live view of the graph in Foxglove (WebSocket server).", INTERFACE,
+                     argv)
+    return run_main(argv, FoxgloveNode, spin_bridge)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,231 @@
+"""The Foxglove live view (foxglove_node) as a Foxglove client meets it: a WebSocket client (the
+``websockets`` package, the Foxglove WebSocket protocol) connects to the bridge of a running lockstep
+graph, sees the channels advertised, subscribes and decodes the robot's transforms, joint states, CPG
+state and contacts, and sets cpg_node's zeta from the parameter panel's side: an accepted value really
+changes the node's parameter (read back through its parameter service); a refused one leaves it and
+shows the node's own reason. Each test on its own DDS domain, every process stopped by the fixtures;
+the server on a free port (port 0, read back from the node's log)."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import struct
+import time
+
+import pytest
+from ros_helpers import START_S
+
+from cpg_walker.nodes.foxglove_view import READY, SUBPROTOCOL, parse_address
+from cpg_walker.robot.joints import JOINT_NAMES
+from cpg_walker.walker.controller import DOFS
+
+# ----------------------------------------------------------------------------- protobuf, the few parts
+
+def fields(buf: bytes) -> dict[int, list]:
+    """A protobuf message's fields by number (varint: int, fixed64: the 8 bytes, length-delimited: bytes)."""
+    out: dict[int, list] = {}
+    i = 0
+    while i < len(buf):
+        key, i = _varint(buf, i)
+        num, wire = key >> 3, key & 7
+        if wire == 0:
+            value, i = _varint(buf, i)
+        elif wire == 1:
+            value, i = buf[i:i + 8], i + 8
+        elif wire == 2:
+            n, i = _varint(buf, i)
+            value, i = buf[i:i + n], i + n
+        elif wire == 5:
+            value, i = buf[i:i + 4], i + 4
+        else:
+            raise ValueError(f"wire type {wire}")
+        out.setdefault(num, []).append(value)
+    return out
+
+
+def _varint(buf: bytes, i: int) -> tuple[int, int]:
+    shift = result = 0
+    while True:
+        b = buf[i]
+        i += 1
+        result |= (b & 0x7F) << shift
+        if not b & 0x80:
+            return result, i
+        shift += 7
+
+
+def _double(f: dict, num: int) -> float:
+    return struct.unpack("<d", f[num][0])[0] if num in f else 0.0
+
+
+def frame_transforms(buf: bytes) -> dict[str, dict]:
+    """foxglove.FrameTransforms -> {child: {parent, translation (x, y, z), rotation (x, y, z, w)}}."""
+    out = {}
+    for t in fields(buf).get(1, []):
+        f = fields(t)
+        tr, rot = fields(f.get(4, [b""])[0]), fields(f.get(5, [b""])[0])
+        out[f[3][0].decode()] = {"parent": f[2][0].decode(),
+                                 "translation": [_double(tr, k) for k in (1, 2, 3)],
+                                 "rotation": [_double(rot, k) for k in (1, 2, 3, 4)]}
+    return out
+
+
+def joint_states(buf: bytes) -> dict[str, tuple[float, float]]:
+    """foxglove.JointStates -> {name: (position, velocity)}."""
+    out = {}
+    for j in fields(buf).get(2, []):
+        f = fields(j)
+        out[f[1][0].decode()] = (_double(f, 2), _double(f, 3))
+    return out
+
+
+def test_the_decoder_reads_what_the_sdk_encodes() -> None:
+    from foxglove.messages import (
+        FrameTransform,
+        FrameTransforms,
+        JointState,
+        JointStates,
+        Quaternion,
+        Vector3,
+    )
+
+    tf = FrameTransforms(transforms=[FrameTransform(parent_frame_id="odom", child_frame_id="base_link",
+                                                    translation=Vector3(x=1.0, y=-2.0, z=0.25),
+                                                    rotation=Quaternion(x=0.1, y=0.2, z=0.3, w=0.9))])
+    assert frame_transforms(tf.encode()) == {"base_link": {"parent": "odom", "translation": [1.0, -2.0, 0.25],
+                                                           "rotation": [0.1, 0.2, 0.3, 0.9]}}
+    js = JointStates(joints=[JointState(name="lleg_joint_2", position=-0.5, velocity=2.0, effort=3.0)])
+    assert joint_states(js.encode()) == {"lleg_joint_2": (-0.5, 2.0)}
+
+
+def test_the_address_option() -> None:
+    assert parse_address(None) == ("127.0.0.1", 8765)
+    assert parse_address("9000") == ("127.0.0.1", 9000)
+    assert parse_address("0.0.0.0:8765") == ("0.0.0.0", 8765)
+    for bad in ("host:", "70000", "a b:80", "127.0.0.1:x"):
+        with pytest.raises(ValueError, match="--foxglove"):
+            parse_address(bad)
+
+
+# ----------------------------------------------------------------------------------------- client
+
+class Client:
+    """A Foxglove WebSocket client: the server's text ops by kind, message data by channel topic."""
+
+    def __init__(self, ws) -> None:
+        self.ws = ws
+        self.ops: list[dict] = []
+        self.channels: dict[str, dict] = {}
+        self.subs: dict[int, str] = {}
+        self.data: dict[str, list[bytes]] = {}
+
+    def pump(self, until, what: str, timeout: float = START_S) -> None:
+        """Receive until ``until()``; AssertionError ``what`` after ``timeout`` wall s (a hang guard)."""
+        end = time.monotonic() + timeout
+        while not until():
+            left = end - time.monotonic()
+            assert left > 0, f"not within {timeout:g} s: {what}"
+            try:
+                raw = self.ws.recv(timeout=min(left, 1.0))
+            except TimeoutError:
+                continue
+            if isinstance(raw, str):
+                op = json.loads(raw)
+                self.ops.append(op)
+                if op["op"] == "advertise":
+                    self.channels.update({c["topic"]: c for c in op["channels"]})
+            elif raw[0] == 1:  # message data: subscription id, log time, payload
+                sub_id, _log_time = struct.unpack_from("<IQ", raw, 1)
+                self.data.setdefault(self.subs[sub_id], []).append(raw[13:])
+
+    def subscribe(self, topics: list[str]) -> None:
+        subs = []
+        for i, topic in enumerate(topics, start=len(self.subs) + 1):
+            self.subs[i] = topic
+            subs.append({"id": i, "channelId": self.channels[topic]["id"]})
+        self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+
+    def request(self, op: dict, answer: str) -> dict:
+        """Send ``op`` (with an id) and wait for the server's ``answer`` op with that id."""
+        self.ws.send(json.dumps(op))
+        self.pump(lambda: any(o["op"] == answer and o.get("id") == op["id"] for o in self.ops),
+                  f"{answer} for {op}")
+        return next(o for o in self.ops if o["op"] == answer and o.get("id") == op["id"])
+
+    def set_param(self, name: str, value: object, rid: str) -> dict[str, object]:
+        op = {"op": "setParameters", "parameters": [{"name": name, "value": value}], "id": rid}
+        answer = self.request(op, "parameterValues")
+        return {p["name"]: p["value"] for p in answer["parameters"]}
+
+
+CHANNELS = {"/tf": "foxglove.FrameTransforms", "/joint_states": "foxglove.JointStates",
+            "/joint_targets": "foxglove.JointStates", "/cpg/state": "cpg_walker.CpgState",
+            "/contact": "cpg_walker.Contact", "/contact/touchdown": "cpg_walker.Touchdown",
+            "/diagnostics": "cpg_walker.Diagnostics", "/robot_description": "std_msgs/msg/String"}
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_foxglove_client_sees_the_robot_and_sets_zeta(graph, probe) -> None:
+    graph.start("foxglove_node", port=0)
+    graph.start("pid_node", lockstep=True, wait_for_targets=True)
+    graph.start("cpg_node", lockstep=True)
+    graph.start("sim_node", pacing="lockstep", duration=0.0)
+    graph.wait_for_log("foxglove_node", READY, START_S)
+    port = int(re.search(r"ws://127\.0\.0\.1:(\d+)", graph.procs["foxglove_node"].log()).group(1))
+    from websockets.sync.client import connect
+
+    with connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], max_size=None,
+                 open_timeout=START_S) as ws:
+        client = Client(ws)
+        client.pump(lambda: bool(client.ops), "serverInfo")
+        info = client.ops[0]
+        assert info["op"] == "serverInfo" and "parameters" in info["capabilities"], info
+        client.pump(lambda: set(CHANNELS) <= set(client.channels), f"channels {sorted(CHANNELS)}")
+        assert {t: client.channels[t]["schemaName"] for t in CHANNELS} == CHANNELS
+
+        wanted = ["/tf", "/joint_states", "/joint_targets", "/cpg/state", "/contact", "/robot_description"]
+        client.subscribe(wanted)
+        client.pump(lambda: all(client.data.get(t) for t in wanted),
+                    f"a message on each of {wanted}")
+
+        tf = frame_transforms(client.data["/tf"][-1])
+        assert {"base_link", "l_sole", "r_sole", "imu"} <= set(tf), sorted(tf)
+        assert tf["base_link"]["parent"] == "odom"
+        assert 0.1 < tf["base_link"]["translation"][2] < 0.5, tf["base_link"]  # the torso above the floor
+        assert all(abs(math.hypot(*t["rotation"]) - 1.0) < 1e-6 for t in tf.values())
+
+        for topic in ("/joint_states", "/joint_targets"):
+            js = joint_states(client.data[topic][-1])
+            assert set(js) == set(JOINT_NAMES), topic
+            assert all(math.isfinite(q) and abs(q) < math.pi for q, _ in js.values()), topic
+
+        state = json.loads(client.data["/cpg/state"][-1])
+        assert list(state["dofs"]) == list(DOFS)
+        for dof in state["dofs"].values():
+            assert dof["phase_rad"] and all(0 <= p < 2 * math.pi for p in dof["phase_rad"])
+            assert all(a >= 0 for a in dof["amplitude_rad"]) and all(f > 0 for f in dof["frequency_hz"])
+
+        contact = json.loads(client.data["/contact"][-1])
+        assert contact["left_load_n"] + contact["right_load_n"] > 0  # the weight is on the soles
+        assert "<robot" in json.loads(client.data["/robot_description"][-1])["data"]
+
+        get = {"op": "getParameters", "parameterNames": ["/cpg.zeta", "/cpg.alpha"], "id": "g"}
+        got = client.request(get, "parameterValues")
+        assert {p["name"]: p["value"] for p in got["parameters"]} == {"/cpg.zeta": 1.0, "/cpg.alpha": 1.0}
+
+        assert client.set_param("/cpg.zeta", 0.8, "ok") == {"/cpg.zeta": 0.8}
+        assert [v.double_value for v in probe.get_params("cpg", ["zeta"])] == [0.8]
+
+        n_status = sum(o["op"] == "status" for o in client.ops)
+        assert client.set_param("/cpg.zeta", 5, "bad") == {"/cpg.zeta": 0.8}
+        reason = probe.set_param("cpg", "zeta", 5.0).reason  # what the node itself says
+        assert reason
+        client.pump(lambda: sum(o["op"] == "status" for o in client.ops) > n_status, "a status message")
+        status = [o for o in client.ops if o["op"] == "status"][n_status]
+        assert status["level"] == 2, status  # error
+        assert "/cpg.zeta" in status["message"] and reason in status["message"], (status, reason)
+        assert [v.double_value for v in probe.get_params("cpg", ["zeta"])] == [0.8]
+        assert "refused by /cpg" in graph.procs["foxglove_node"].log()
