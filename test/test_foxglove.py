@@ -229,3 +229,43 @@ def test_foxglove_client_sees_the_robot_and_sets_zeta(graph, probe) -> None:
         assert "/cpg.zeta" in status["message"] and reason in status["message"], (status, reason)
         assert [v.double_value for v in probe.get_params("cpg", ["zeta"])] == [0.8]
         assert "refused by /cpg" in graph.procs["foxglove_node"].log()
+
+
+def test_graph_spec_starts_the_bridge_with_its_address_and_overrides() -> None:
+    from cpg_walker.nodes.graph_runner import GraphSpec
+
+    spec = GraphSpec(foxglove="0.0.0.0:9001", params=[("foxglove_node", "display_rate", 20.0)])
+    assert spec.node_params()["foxglove_node"] == {"host": "0.0.0.0", "port": 9001, "display_rate": 20.0}
+    assert GraphSpec(foxglove="").node_params()["foxglove_node"] == {"host": "127.0.0.1", "port": 8765}
+    assert "foxglove_node" not in GraphSpec().node_params()
+    with pytest.raises(ValueError, match="--foxglove"):
+        GraphSpec(foxglove="localhost:99999").node_params()
+
+
+def test_cpg_state_by_dof_name_and_touchdowns_from_paired_loads() -> None:
+    from std_msgs.msg import MultiArrayDimension
+
+    from cpg_walker.nodes.foxglove_view import Contacts, cpg_layout, cpg_state
+
+    dims = [MultiArrayDimension(label="dof:a,b", size=2, stride=18),
+            MultiArrayDimension(label="o", size=3, stride=9),
+            MultiArrayDimension(label="v", size=3, stride=3)]
+    names, n = cpg_layout(dims)
+    data = [[[7.0, 0.5, 0.1], [-1.0, 1.0, 0.2], [0.3, 0.4, 0.05]],
+            [[0.0, 0.5, 0.0], [1.0, 1.0, 0.0], [0, 0, 0]]]
+    state = cpg_state(names, n, [x for dof in data for row in dof for x in row], 1_500_000_000)
+    assert state["timestamp"] == {"sec": 1, "nsec": 500_000_000}
+    assert state["dofs"]["a"]["phase_rad"] == pytest.approx([7.0 - 2 * math.pi, 2 * math.pi - 1.0])
+    assert state["dofs"]["a"]["amplitude_rad"] == [0.1, 0.2] and state["dofs"]["a"]["target_rad"] == 0.3
+    with pytest.raises(ValueError):
+        cpg_layout(dims[:2])
+
+    c = Contacts()
+    step = 2_000_000  # 2 ms samples; the left foot lifts for 0.4 s, then lands
+    for k in range(600):
+        left = 0.0 if 100 <= k < 300 else 30.0
+        c.add("right", k * step, 30.0)
+        if k != 50:  # a lost left sample: that stamp is never paired
+            c.add("left", k * step, left)
+    assert c.touchdowns == [("left", 300 * step)]
+    assert c.state()["left_touchdowns"] == 1 and c.state()["left_down"] and c.state()["right_load_n"] == 30.0
