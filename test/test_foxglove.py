@@ -269,3 +269,55 @@ def test_cpg_state_by_dof_name_and_touchdowns_from_paired_loads() -> None:
             c.add("left", k * step, left)
     assert c.touchdowns == [("left", 300 * step)]
     assert c.state()["left_touchdowns"] == 1 and c.state()["left_down"] and c.state()["right_load_n"] == 30.0
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_bridge_takes_its_packaged_file_and_refuses_what_it_cannot_forward(graph, probe) -> None:
+    """Started without --params-file (``ros2 run``), on a free port: every other value is its packaged
+    file's; a set of a parameter it does not forward, of the read-only URDF, and of a node that is not
+    running each come back with a reason and without a crash."""
+    import subprocess
+    import sys
+
+    from ros_helpers import ANSWER_S
+
+    from cpg_walker.nodes.runtime import params_file
+    from cpg_walker.paths import ros_parameters
+
+    log = graph.log_dir / "foxglove_node.bare.log"
+    graph.log_dir.mkdir(parents=True, exist_ok=True)
+    with open(log, "wb") as out:
+        proc = subprocess.Popen([sys.executable, "-m", "cpg_walker.nodes.foxglove_node", "--ros-args",
+                                 "-p", "port:=0", "-p", "service_timeout:=0.5"], env=graph.env, stdout=out,
+                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
+    try:
+        expected = {k: v for k, v in ros_parameters("foxglove.yaml", "foxglove").items()
+                    if k not in ("port", "service_timeout")}
+        values = probe.get_params("foxglove", list(expected))
+        from rclpy.parameter import parameter_value_to_python
+
+        got = {k: parameter_value_to_python(v) for k, v in zip(expected, values, strict=True)}
+        assert got == expected
+        end = time.monotonic() + ANSWER_S
+        while READY not in log.read_text():
+            assert time.monotonic() < end and proc.poll() is None, log.read_text()
+            time.sleep(0.05)
+        port = int(re.search(r"ws://127\.0\.0\.1:(\d+)", log.read_text()).group(1))
+        from websockets.sync.client import connect
+
+        with connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], open_timeout=ANSWER_S) as ws:
+            client = Client(ws)
+            assert client.set_param("/robot_description", "<robot/>", "ro")["/robot_description"].startswith(
+                "<?xml")
+            assert client.set_param("/sim.pacing", "fast", "unknown") == {}
+            assert client.set_param("/cpg.zeta", 0.5, "absent") == {}  # no cpg node: no value to give
+            client.pump(lambda: sum(o["op"] == "status" for o in client.ops) >= 3, "three status messages")
+            text = " | ".join(o["message"] for o in client.ops if o["op"] == "status")
+            assert "read-only" in text and "not a forwarded parameter" in text and "/cpg/" in text, text
+        assert proc.poll() is None
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    text = log.read_text()
+    assert str(params_file("foxglove")) in text and "Traceback" not in text
