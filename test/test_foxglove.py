@@ -321,3 +321,16 @@ def test_the_bridge_takes_its_packaged_file_and_refuses_what_it_cannot_forward(g
         proc.wait(timeout=30)
     text = log.read_text()
     assert str(params_file("foxglove")) in text and "Traceback" not in text
+
+
+def test_the_shipped_layout_is_the_generated_one() -> None:
+    """docs/foxglove_layout.json == a fresh ``python -m cpg_walker.nodes.foxglove_layout``; its plots name
+    channels the bridge serves."""
+    from pathlib import Path
+
+    from cpg_walker.nodes.foxglove_layout import layout_json
+
+    shipped = Path(__file__).resolve().parent.parent / "docs" / "foxglove_layout.json"
+    assert shipped.read_text() == layout_json(), "regenerate: python -m cpg_walker.nodes.foxglove_layout"
+    paths = re.findall(r'"value": "(/[^."\[]+(?:/[^."\[]+)*)', shipped.read_text())
+    assert paths and set(paths) <= set(CHANNELS), set(paths) - set(CHANNELS)
