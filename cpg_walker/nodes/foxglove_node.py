@@ -240,7 +240,8 @@ class FoxgloveNode(Node):
             stamp = Timestamp(**stamp_dict(t_ns))
             self.ch_tf.log(FrameTransforms(transforms=[frame_transform(stamp, t) for t in poses]),
                            log_time=t_ns)
-        if self.contacts.t_ns >= 0 and self.ch_contact.has_sinks():
+        if self.contacts.t_ns > self.shown.get("/contact", -1) and self.ch_contact.has_sinks():
+            self.shown["/contact"] = self.contacts.t_ns
             self.ch_contact.log(self.contacts.state(), log_time=self.contacts.t_ns)
         if self.send_description:
             self.send_description = False
@@ -257,7 +258,7 @@ class FoxgloveNode(Node):
 
     def on_exit(self) -> None:
         self.server.stop()
-        exit_log(self, "stats " + json.dumps({"received": self.counts,
+        exit_log(self, "stats " + json.dumps({"cpu_s": round(time.process_time(), 2), "received": self.counts,
                                               "touchdowns": self.contacts.detector.events}))
 
 
