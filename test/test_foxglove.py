@@ -334,3 +334,25 @@ def test_the_shipped_layout_is_the_generated_one() -> None:
     assert shipped.read_text() == layout_json(), "regenerate: python -m cpg_walker.nodes.foxglove_layout"
     paths = re.findall(r'"value": "(/[^."\[]+(?:/[^."\[]+)*)', shipped.read_text())
     assert paths and set(paths) <= set(CHANNELS), set(paths) - set(CHANNELS)
+
+
+def test_sole_load_read_straight_from_the_cdr_equals_rclpy_deserialization() -> None:
+    import random
+
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from cpg_walker.nodes.foxglove_view import wrench_load
+
+    rng = random.Random(13)
+    for k in range(200):
+        m = WrenchStamped()
+        m.header.frame_id = "x" * rng.randint(0, 12)  # every alignment of the doubles after it
+        m.header.stamp.sec, m.header.stamp.nanosec = rng.randint(0, 10**6), rng.randint(0, 10**9 - 1)
+        m.wrench.force.x, m.wrench.force.z, m.wrench.torque.z = 7.0, rng.uniform(-100, 100), 3.0
+        data = serialize_message(m)
+        back = deserialize_message(data, WrenchStamped)
+        assert wrench_load(data) == (back.header.stamp.sec * 10**9 + back.header.stamp.nanosec,
+                                     back.wrench.force.z), k
+    with pytest.raises(ValueError):
+        wrench_load(serialize_message(m)[:30])

@@ -13,9 +13,12 @@ nodes through their parameter services (foxglove_params.py).
 from __future__ import annotations
 
 import json
+import math
+import struct
 import time
 
 import foxglove
+import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from foxglove.channels import FrameTransformsChannel, JointStatesChannel
 from foxglove.messages import (
@@ -52,6 +55,7 @@ from cpg_walker.nodes.foxglove_view import (
     diagnostics,
     is_loopback,
     stamp_dict,
+    wrench_load,
 )
 from cpg_walker.nodes.messages import stamp_ns
 from cpg_walker.nodes.runtime import (
@@ -84,8 +88,12 @@ calls: /<node>/get_parameters, /<node>/set_parameters of the forwarded parameter
 parameters: host, port (0 = any free port, logged), display_rate (Hz, wall clock), service_timeout (wall s),
   parameters (forwarded, NODE.NAME), realtime_priority, nice, cpu_affinity (OS scheduling)"""
 
-BEST_EFFORT = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
-#: Wall s between services of the executor (/cpg/state, /diagnostics, parameter answers).
+#: The shown topics: only the newest message is kept (by the middleware) until the next display.
+NEWEST = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+#: The sole loads: every sample (touchdowns), taken every SLOW_PERIOD_S (depth: 64 ms at 500 Hz).
+LOADS = QoSProfile(depth=32, reliability=ReliabilityPolicy.BEST_EFFORT)
+#: Wall s between takes of the sole loads and services of the executor (/cpg/state, /diagnostics,
+#: parameter answers).
 SLOW_PERIOD_S = 0.01
 
 
@@ -143,12 +151,17 @@ class FoxgloveNode(Node):
         self.contacts = Contacts()
         self.poser = Poser()
         self.warn = Throttle(5.0)
-        hot = [self.create_subscription(cls, t, lambda b, t=t: self._keep(t, b), BEST_EFFORT, raw=True)
-               for cls, t in ((RosJointState, "/joint_states"), (RosJointState, "/joint_targets"),
-                              (Odometry, "/odom/ground_truth"))]
-        hot += [self.create_subscription(WrenchStamped, f"/foot_load/{s}", lambda b, s=s: self._load(s, b),
-                                         BEST_EFFORT, raw=True) for s in ("left", "right")]
-        self.hot = HotPath(self, hot)
+        # the high-rate topics on a hidden node that no executor spins: their messages are taken (raw, no
+        # deserialization) only when due, by the HotPaths below, never one Python callback per message
+        self.taker = rclpy.create_node("_foxglove_taker", context=self.context,
+                                       start_parameter_services=False)
+        self.newest = HotPath(self.taker, [
+            self.taker.create_subscription(cls, t, lambda b, t=t: self._keep(t, b), NEWEST, raw=True)
+            for cls, t in ((RosJointState, "/joint_states"), (RosJointState, "/joint_targets"),
+                           (Odometry, "/odom/ground_truth"))])
+        self.loads = HotPath(self.taker, [
+            self.taker.create_subscription(WrenchStamped, f"/foot_load/{s}", lambda b, s=s: self._load(s, b),
+                                           LOADS, raw=True) for s in ("left", "right")])
         self.create_subscription(Float64MultiArray, "/cpg/state", self._cpg_state, 10)
         self.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
         self.create_subscription(ParameterEvent, "/parameter_events", self._parameter_event, 50)
@@ -165,12 +178,13 @@ class FoxgloveNode(Node):
         self.counts[topic] = self.counts.get(topic, 0) + 1
 
     def _load(self, side: str, data: bytes) -> None:
+        self.counts[side] = self.counts.get(side, 0) + 1
         try:
-            msg = deserialize_message(data, WrenchStamped)
-            load = float(msg.wrench.force.z)
-            self.contacts.add(side, stamp_ns(msg), load if load == load else 0.0)
-        except Exception as exc:  # a malformed message: dropped
+            t_ns, load = wrench_load(data)
+        except (ValueError, struct.error) as exc:  # a malformed message: dropped
             self._warn(f"/foot_load/{side}", exc)
+            return
+        self.contacts.add(side, t_ns, load if math.isfinite(load) else 0.0)
 
     def _warn(self, what: str, exc: Exception) -> None:
         self.warn.warn(self, what, f"dropped a malformed {what} message: {exc}")
@@ -224,6 +238,7 @@ class FoxgloveNode(Node):
     def display(self) -> None:
         """Show the newest joint states, targets, link transforms and contact state (each at most once per
         display period; skipped while no client subscribes to it)."""
+        self.newest.drain()
         js = self._joint_states("/joint_states", self.ch_js)
         self._joint_states("/joint_targets", self.ch_jt)
         odom = self.latest.get("/odom/ground_truth")
@@ -258,6 +273,7 @@ class FoxgloveNode(Node):
 
     def on_exit(self) -> None:
         self.server.stop()
+        self.taker.destroy_node()
         exit_log(self, "stats " + json.dumps({"cpu_s": round(time.process_time(), 2), "received": self.counts,
                                               "touchdowns": self.contacts.detector.events}))
 
@@ -270,24 +286,23 @@ def frame_transform(stamp: Timestamp, p) -> FrameTransform:
 
 
 def spin_bridge(node: FoxgloveNode) -> None:
-    """Take the high-rate messages as they come; the executor every SLOW_PERIOD_S; show the newest state
-    every display period."""
-    import rclpy
+    """Serve the executor (low-rate topics, services) in between; every SLOW_PERIOD_S take the sole loads
+    that came (touchdowns); every display period show the newest state."""
     from rclpy.executors import SingleThreadedExecutor
 
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     next_slow = next_display = 0.0
     while rclpy.ok():
-        node.hot.poll(0.005)
         now = time.monotonic()
         if now >= next_slow:
-            executor.spin_once(timeout_sec=0.0)
+            node.loads.drain()
             node.flush_touchdowns()
             next_slow = now + SLOW_PERIOD_S
         if now >= next_display:
             node.display()
             next_display = max(next_display + node.display_period, now)
+        executor.spin_once(timeout_sec=max(0.0, min(next_slow, next_display) - time.monotonic()))
 
 
 def main(argv: list[str] | None = None) -> int:
