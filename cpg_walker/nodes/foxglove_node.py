@@ -90,11 +90,10 @@ parameters: host, port (0 = any free port, logged), display_rate (Hz, wall clock
 
 #: The shown topics: only the newest message is kept (by the middleware) until the next display.
 NEWEST = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-#: The sole loads: every sample (touchdowns), taken every SLOW_PERIOD_S (depth: 64 ms at 500 Hz).
-LOADS = QoSProfile(depth=32, reliability=ReliabilityPolicy.BEST_EFFORT)
-#: Wall s between takes of the sole loads and services of the executor (/cpg/state, /diagnostics,
-#: parameter answers).
-SLOW_PERIOD_S = 0.01
+#: The sole loads: every sample (touchdowns), taken at least every LOADS_PERIOD_S (depth: 128 ms at
+#: 500 Hz).
+LOADS = QoSProfile(depth=64, reliability=ReliabilityPolicy.BEST_EFFORT)
+LOADS_PERIOD_S = 0.05
 
 
 class FoxgloveNode(Node):
@@ -215,9 +214,11 @@ class FoxgloveNode(Node):
         return max(self.shown.get("/joint_states", 0), self.contacts.t_ns, 0)
 
     # ------------------------------------------------------------------ what the clients see
-    def _joint_states(self, topic: str, channel) -> RosJointState | None:
+    def _joint_states(self, topic: str, channel, needed: bool = False) -> RosJointState | None:
+        """The newest message of ``topic``, shown on ``channel`` if a client subscribes to it (and decoded
+        only then, or when ``needed``)."""
         data = self.latest.pop(topic, None)
-        if data is None:
+        if data is None or not (needed or channel.has_sinks()):
             return None
         try:
             msg = deserialize_message(data, RosJointState)
@@ -237,32 +238,41 @@ class FoxgloveNode(Node):
 
     def display(self) -> None:
         """Show the newest joint states, targets, link transforms and contact state (each at most once per
-        display period; skipped while no client subscribes to it)."""
-        self.newest.drain()
-        js = self._joint_states("/joint_states", self.ch_js)
-        self._joint_states("/joint_targets", self.ch_jt)
-        odom = self.latest.get("/odom/ground_truth")
-        if js is not None and odom is not None and self.ch_tf.has_sinks():
-            try:
-                o = deserialize_message(odom, Odometry).pose.pose
-                p, q = o.position, o.orientation
-                poses = self.poser.transforms((p.x, p.y, p.z), (q.w, q.x, q.y, q.z),
-                                              zip(js.name, js.position, strict=False))
-            except Exception as exc:
-                self._warn("/odom/ground_truth", exc)
-                poses = []
-            t_ns = stamp_ns(js)
-            stamp = Timestamp(**stamp_dict(t_ns))
-            self.ch_tf.log(FrameTransforms(transforms=[frame_transform(stamp, t) for t in poses]),
-                           log_time=t_ns)
+        display period, and only while a client subscribes to it: nothing is taken or decoded otherwise)."""
+        robot = any(c.has_sinks() for c in (self.ch_tf, self.ch_js, self.ch_jt))
+        t_ns = self._show_robot() if robot else None
         if self.contacts.t_ns > self.shown.get("/contact", -1) and self.ch_contact.has_sinks():
             self.shown["/contact"] = self.contacts.t_ns
             self.ch_contact.log(self.contacts.state(), log_time=self.contacts.t_ns)
         if self.send_description:
             self.send_description = False
             self.ch_desc.log({"data": self.urdf})
-        if js is not None:
-            self.server.broadcast_time(stamp_ns(js))
+        t_ns = t_ns if t_ns is not None else self.contacts.t_ns
+        if t_ns >= 0:
+            self.server.broadcast_time(t_ns)
+
+    def _show_robot(self) -> int | None:
+        """/joint_states, /joint_targets and /tf from the newest messages; the joint states' stamp."""
+        self.newest.drain()  # the newest of each (depth 1); the ground truth stays until a newer one
+        js = self._joint_states("/joint_states", self.ch_js, needed=self.ch_tf.has_sinks())
+        self._joint_states("/joint_targets", self.ch_jt)
+        if js is None:
+            return None
+        t_ns = stamp_ns(js)
+        odom = self.latest.get("/odom/ground_truth")
+        if odom is not None and self.ch_tf.has_sinks():
+            try:
+                o = deserialize_message(odom, Odometry).pose.pose
+            except Exception as exc:
+                self._warn("/odom/ground_truth", exc)
+                return t_ns
+            p, q = o.position, o.orientation
+            poses = self.poser.transforms((p.x, p.y, p.z), (q.w, q.x, q.y, q.z),
+                                          zip(js.name, js.position, strict=False))
+            stamp = Timestamp(**stamp_dict(t_ns))
+            self.ch_tf.log(FrameTransforms(transforms=[frame_transform(stamp, t) for t in poses]),
+                           log_time=t_ns)
+        return t_ns
 
     def flush_touchdowns(self) -> None:
         """One /contact/touchdown message per detected step (never throttled: they are events)."""
@@ -286,23 +296,23 @@ def frame_transform(stamp: Timestamp, p) -> FrameTransform:
 
 
 def spin_bridge(node: FoxgloveNode) -> None:
-    """Serve the executor (low-rate topics, services) in between; every SLOW_PERIOD_S take the sole loads
-    that came (touchdowns); every display period show the newest state."""
+    """Every tick (the display period, at most LOADS_PERIOD_S) take the sole loads that came (touchdowns)
+    and show the newest state; in between, the executor waits for the low-rate topics and the parameter
+    services' answers (one wake-up per tick and per such message: little CPU while idle)."""
     from rclpy.executors import SingleThreadedExecutor
 
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    next_slow = next_display = 0.0
+    period = min(node.display_period, LOADS_PERIOD_S)
+    next_tick = 0.0
     while rclpy.ok():
         now = time.monotonic()
-        if now >= next_slow:
+        if now >= next_tick:
             node.loads.drain()
             node.flush_touchdowns()
-            next_slow = now + SLOW_PERIOD_S
-        if now >= next_display:
             node.display()
-            next_display = max(next_display + node.display_period, now)
-        executor.spin_once(timeout_sec=max(0.0, min(next_slow, next_display) - time.monotonic()))
+            next_tick = max(next_tick + period, now)
+        executor.spin_once(timeout_sec=max(0.0, next_tick - time.monotonic()))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -163,9 +163,17 @@ class Poser:
     def __init__(self) -> None:
         self.model = mujoco.MjModel.from_xml_path(str(MODEL_PATH))
         self.data = mujoco.MjData(self.model)
+        hinges = [j for j in range(self.model.njnt) if self.model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE]
+        self.qpos_of = {self.model.joint(j).name: int(self.model.jnt_qposadr[j]) for j in hinges}
 
     def transforms(self, position, quat_wxyz, joints) -> list:
-        set_pose(self.model, self.data, position, quat_wxyz, joints)
+        """``joints``: (name, angle) pairs; names the model does not have are skipped."""
+        set_pose(self.model, self.data, position, quat_wxyz, ())  # the floating base
+        qpos, adr = self.data.qpos, self.qpos_of
+        for name, q in joints:
+            a = adr.get(name)
+            if a is not None:
+                qpos[a] = q
         mujoco.mj_kinematics(self.model, self.data)
         return [odom_transform(self.model, self.data), *body_transforms(self.model, self.data),
                 *site_transforms(self.model, self.data)]
