@@ -101,6 +101,11 @@ class FoxgloveNode(Node):
 
     def __init__(self, **node_options) -> None:
         super().__init__("foxglove", **node_options)
+        if self.get_parameter("use_sim_time").value:
+            # its times are the messages' stamps; sim time would subscribe /clock: a callback per tick
+            from rclpy.parameter import Parameter
+
+            self.set_parameters([Parameter("use_sim_time", value=False)])
         host = str(declare(self, "host", str_param(
             "address the WebSocket server binds to (127.0.0.1: this machine only; 0.0.0.0: every interface)",
             read_only=True)))
