@@ -3,10 +3,12 @@
 
 It runs a foxglove-sdk WebSocket server (bound to 127.0.0.1 unless ``host`` says otherwise) and shows the
 graph's topics on it (channels and encodings: foxglove_view.py), at most ``display_rate`` times per wall
-second and only while a client is subscribed to a channel: the high-rate topics are taken best-effort and
-raw (no deserialization until a message is shown), so the bridge never holds back the sim, PID and CPG
-nodes; it runs in its own process at lowered priority (config/foxglove.yaml). Touchdowns are detected on
-every /foot_load sample. Foxglove's parameter panel gets and sets the forwarded parameters of the other
+second and only while a client is subscribed to a channel. It only listens, best effort (a reader that
+falls behind drops; it never makes a publisher resend or wait), and spends no Python per message: the
+shown topics (depth 1) are on a hidden node that no executor spins, taken raw at a display tick and
+decoded only for a subscribed channel; the sole loads (every sample: touchdowns) are drained each tick and
+read from their CDR. Its own process, wall time (sim time would subscribe /clock), nice 10
+(config/foxglove.yaml). Foxglove's parameter panel gets and sets the forwarded parameters of the other
 nodes through their parameter services (foxglove_params.py).
 """
 
