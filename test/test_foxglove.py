@@ -356,3 +356,23 @@ def test_sole_load_read_straight_from_the_cdr_equals_rclpy_deserialization() -> 
                                      back.wrench.force.z), k
     with pytest.raises(ValueError):
         wrench_load(serialize_message(m)[:30])
+
+
+@pytest.mark.ros
+def test_a_taken_port_is_one_clear_error_and_starts_nothing(ros_domain, tmp_path) -> None:
+    """``cpg-walker graph --foxglove PORT`` on a port in use: the bridge (started first) fails, the graph
+    stops before the sim starts, and the error names the address."""
+    import io
+    import socket
+
+    from cpg_walker.nodes.graph_runner import GraphSpec, run_foreground
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        out = io.StringIO()
+        spec = GraphSpec(foxglove=f"127.0.0.1:{port}", duration=1.0, log_dir=str(tmp_path / "logs"))
+        with pytest.raises(ValueError, match=rf"did not start: .*127\.0\.0\.1:{port}"):
+            run_foreground(spec, out=out)
+    assert not (tmp_path / "logs" / "sim_node.log").exists()
