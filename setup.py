@@ -14,6 +14,7 @@ NODES: dict[str, str] = {
     "target_player_node": "cpg_walker.nodes.target_player_node:main",
     "cpg_node": "cpg_walker.nodes.cpg_node:main",
     "recorder_node": "cpg_walker.nodes.recorder_node:main",
+    "foxglove_node": "cpg_walker.nodes.foxglove_node:main",
 }
 TOOLS = {
     "cpg-walker": "cpg_walker.cli.main:main",

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.graph import add_foxglove_option
 from cpg_walker.nodes.runtime import PACINGS
 
 
@@ -27,6 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--paper", action="store_true",
                    help="also run the paper's Section II experiment and the CPG learning (Fig. 6) first, "
                         "in-process, into DIR/section2 and DIR/learn")
+    add_foxglove_option(p)
     p.set_defaults(func=_run)
 
 
@@ -55,7 +57,7 @@ def _run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         run_learn(str(Path(args.out) / "learn"))
     print(f"ROS_DOMAIN_ID={domain} ({how})", file=sys.stderr)
-    summary = run_demo(args.out, args.duration, pacing=args.pacing, domain_id=domain)
+    summary = run_demo(args.out, args.duration, pacing=args.pacing, domain_id=domain, foxglove=args.foxglove)
     fall = f"fell at {summary['fall_time_s']} s" if summary["fell"] else "no fall"
     print("segment (from sim s: zeta, alpha -> forward speed over its second half):", file=sys.stderr)
     for seg in summary["segments"]:

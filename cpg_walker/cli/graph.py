@@ -10,7 +10,7 @@ from cpg_walker.nodes.runtime import PACINGS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
 ALIASES = {"sim": "sim_node", "pid": "pid_node", "cpg": "cpg_node", "player": "target_player_node",
-           "target_player": "target_player_node"}
+           "target_player": "target_player_node", "foxglove": "foxglove_node"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,13 +29,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="DDS domain (default: ROS_DOMAIN_ID if set, else a free one in 1..101)")
     p.add_argument("-p", dest="params", action="append", default=[], metavar="NODE:NAME=VALUE",
                    help="a start-up parameter, e.g. -p sim:real_time_factor=0.5 -p cpg:cpg_file=x.yaml "
-                        "(NODE: sim, pid, cpg, player; VALUE parsed as YAML); repeatable")
+                        "(NODE: sim, pid, cpg, player, foxglove; VALUE parsed as YAML); repeatable")
     p.add_argument("--log-dir", default=None, metavar="DIR",
                    help="where the node logs are written (default: a new temporary directory)")
     p.add_argument("--record", default=None, metavar="DIR",
                    help="record every topic (+ /tf, /tf_static) to DIR/recording.mcap, a rosbag2 MCAP, "
                         "complete once the graph has stopped (cpg-walker plot reads it)")
+    add_foxglove_option(p)
     p.set_defaults(func=_run)
+
+
+def add_foxglove_option(p: argparse.ArgumentParser) -> None:
+    """``--foxglove [HOST:]PORT`` (graph, walk, demo): the live view (foxglove_node)."""
+    p.add_argument("--foxglove", nargs="?", const="", default=None, metavar="[HOST:]PORT",
+                   help="also serve a live view to Foxglove (foxglove_node, a WebSocket server; default "
+                        "127.0.0.1:8765, this machine only unless HOST is given; port 0: any free one): the "
+                        "robot in 3D, joints, CPG phases and amplitudes, sole loads, zeta/alpha settable")
 
 
 def parse_param(text: str) -> tuple[str, str, object]:
@@ -46,7 +55,8 @@ def parse_param(text: str) -> tuple[str, str, object]:
     name, eq, value = rest.partition("=")
     node = ALIASES.get(node, node)
     if not sep or not eq or not name or node not in ALIASES.values():
-        raise ValueError(f"-p expects NODE:NAME=VALUE with NODE one of sim, pid, cpg, player; got {text!r}")
+        raise ValueError(f"-p expects NODE:NAME=VALUE with NODE one of sim, pid, cpg, player, foxglove; got "
+                         f"{text!r}")
     try:
         parsed = yaml.safe_load(value)
     except yaml.YAMLError:
@@ -60,5 +70,5 @@ def _run(args: argparse.Namespace) -> int:
     spec = GraphSpec(pacing=args.pacing, duration=args.duration, zeta=args.zeta, alpha=args.alpha,
                      player=args.player, domain_id=args.domain_id,
                      params=[parse_param(t) for t in args.params], log_dir=args.log_dir,
-                     record=args.record)
+                     record=args.record, foxglove=args.foxglove)
     return run_foreground(spec)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.graph import add_foxglove_option
 from cpg_walker.nodes.runtime import PACINGS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
@@ -35,6 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--record", action="store_true",
                    help="also record every topic (+ /tf, /tf_static) to DIR/recording.mcap, a rosbag2 MCAP "
                         "(Foxglove, PlotJuggler, ros2 bag play; cpg-walker plot)")
+    add_foxglove_option(p)
     p.set_defaults(func=_run)
 
 
@@ -47,7 +49,7 @@ def _run(args: argparse.Namespace) -> int:
     feedback = None if args.feedback is None else args.feedback == "on"
     report = run_graph_walk(args.out, duration=args.duration, zeta=args.zeta, alpha=args.alpha,
                             cpg_file=args.cpg_file, feedback=feedback, schedule=schedule, pacing=args.pacing,
-                            record=args.record)
+                            record=args.record, foxglove=args.foxglove)
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps",
             "lateral_drift_m", "heading_change_deg", "zeta", "alpha", "feedback", "real_time_factor")
     print(json.dumps({k: report[k] for k in keys}))

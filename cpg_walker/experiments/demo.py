@@ -308,9 +308,10 @@ def summarize_recording(bag: str | Path, schedule: list, walk_report: dict | Non
 # ------------------------------------------------------------------------------------------------ run
 
 def run_demo(out_dir: str | Path, duration: float, pacing: str = "lockstep", domain_id: int | None = None,
-             stream: Any = None) -> dict:
+             stream: Any = None, foxglove: str | None = None) -> dict:
     """The demo into ``out_dir``: the graph walk with the schedule, live status and the recording, then
-    the plots, the video and summary.json (also after Ctrl-C: ``interrupted`` in the summary)."""
+    the plots, the video and summary.json (also after Ctrl-C: ``interrupted`` in the summary).
+    ``foxglove``: ``[HOST:]PORT`` of a Foxglove live view of the walk (run_graph_walk's)."""
     from cpg_walker.experiments.walk_graph import run_graph_walk
     from cpg_walker.nodes.recording import BAG_NAME
 
@@ -327,7 +328,7 @@ def run_demo(out_dir: str | Path, duration: float, pacing: str = "lockstep", dom
         status = GraphStatus(display)
         try:
             report = run_graph_walk(out, duration=duration, schedule=schedule, pacing=pacing, record=True,
-                                    domain_id=domain_id, watchers=[status])
+                                    domain_id=domain_id, watchers=[status], foxglove=foxglove)
         except KeyboardInterrupt:
             interrupted = True
     if interrupted:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import sys
 import threading
 import time
 from collections.abc import Sequence
@@ -174,19 +175,28 @@ def run_graph_walk(
     record: bool = False,
     domain_id: int | None = None,
     watchers: Sequence[Watcher] = (),
+    foxglove: str | None = None,
 ) -> dict:
     """Walk through sim_node + pid_node + cpg_node; write ``walk.json``; return its content. ``record``:
     every topic also to ``out_dir/recording.mcap`` (recorder_node; walk.json's ``bag``). ``zeta``,
     ``alpha``, ``feedback``, ``cpg_file`` None: cpg_node's own (config/cpg.yaml), not passed on.
     ``schedule``: (t, zeta, alpha) changes sent through cpg_node's SetParameters service (module doc).
     ``domain_id``: the graph's DDS domain (None: a free one). ``watchers`` are started on the graph's domain
-    once its nodes are (e.g. a live status) and stopped when it has finished, however it ends."""
+    once its nodes are (e.g. a live status) and stopped when it has finished, however it ends.
+    ``foxglove``: ``[HOST:]PORT`` ('' = 127.0.0.1:8765) of a Foxglove live view (foxglove_node) on the
+    graph; its URL is printed to stderr once it listens."""
     from cpg_walker.experiments.replay_graph import run_graph
     from cpg_walker.nodes.runtime import PACINGS
     from cpg_walker.walker.learning import load_controller
 
     if pacing not in PACINGS:
         raise ValueError(f"pacing must be realtime, fast or lockstep, got {pacing!r}")
+    view = None
+    if foxglove is not None:
+        from cpg_walker.nodes.foxglove_view import parse_address
+
+        host, port = parse_address(foxglove)  # ValueError before anything starts
+        view = {"host": host, "port": port}
     if not (duration > 0 and math.isfinite(duration)):
         raise ValueError(f"--duration must be a positive number of seconds, got {duration}")
     defaults = cpg_defaults()
@@ -222,6 +232,10 @@ def run_graph_walk(
         for w in watchers:
             w.start(graph.domain_id)
             started.append(w)
+        if view is not None:
+            from cpg_walker.nodes.graph_runner import start_foxglove
+
+            print(start_foxglove(graph, view), file=sys.stderr, flush=True)
         return []
 
     try:

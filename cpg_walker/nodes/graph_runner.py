@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TextIO
 
 PREFIX = {"sim_node": "sim", "pid_node": "pid", "cpg_node": "cpg", "target_player_node": "player",
-          "recorder_node": "rec"}
+          "recorder_node": "rec", "foxglove_node": "fox"}
 
 
 @dataclass
@@ -31,6 +31,7 @@ class GraphSpec:
     params: list[tuple[str, str, object]] = field(default_factory=list)
     log_dir: str | None = None
     record: str | None = None  # a directory: recorder_node writes recording.mcap there
+    foxglove: str | None = None  # [HOST:]PORT ('' = the default): foxglove_node, the live view
 
     def sim_value(self, name: str) -> object:
         """The sim's ``pacing`` / ``duration``: as given, else its parameters file's."""
@@ -67,6 +68,11 @@ class GraphSpec:
             if reason:
                 raise ValueError(reason)
             out["cpg_node"][name] = float(value)
+        if self.foxglove is not None:
+            from cpg_walker.nodes.foxglove_view import parse_address
+
+            host, port = parse_address(self.foxglove)
+            out["foxglove_node"] = {"host": host, "port": port}
         for node, name, value in self.params:
             if node not in out:
                 raise ValueError(f"-p {node}:{name}: {node} is not part of this graph ({', '.join(out)})")
@@ -95,6 +101,28 @@ def resolve_domain(domain_id: int | None) -> tuple[int, str]:
 
 #: Wall s for the recorder to start listening before the graph starts without it being an error.
 RECORDER_START_S = 120.0
+#: Wall s for foxglove_node's server to listen (imports, the MuJoCo model) before that is an error.
+FOXGLOVE_START_S = 120.0
+
+
+def start_foxglove(g, params: dict[str, object]) -> str:
+    """foxglove_node on the graph ``g`` (``params``: its overrides, host and port); returns its log line
+    with the ws:// URL once the server listens. ValueError with the node's own error when it cannot start
+    (e.g. the port is taken)."""
+    import re
+
+    from cpg_walker.nodes.foxglove_view import READY
+
+    g.start("foxglove_node", **params)
+    try:
+        g.wait_for_log("foxglove_node", READY, FOXGLOVE_START_S)
+    except RuntimeError:
+        log = g.procs["foxglove_node"].log()
+        errors = [line for line in log.splitlines() if "error" in line.lower()]
+        raise ValueError(f"the Foxglove live view did not start: {errors[-1] if errors else log[-500:]}") \
+            from None
+    found = re.search(rf"{READY}.*", g.procs["foxglove_node"].log())
+    return found.group(0) if found else READY
 
 
 class LogTail:
@@ -138,6 +166,8 @@ def banner(domain: int, how: str, spec: GraphSpec, log_dir: Path) -> str:
     lines = [f"ROS_DOMAIN_ID={domain} ({how}); sim_node + pid_node + {target}, {spec.sim_value('pacing')} "
              f"pacing, {until}",
              f"node logs: {log_dir}"]
+    if spec.foxglove is not None:
+        lines.append("Foxglove live view: foxglove_node logs the ws:// URL to open once it listens")
     if spec.record:
         lines.append(f"recording every topic to {Path(spec.record).resolve()}/recording.mcap (complete once "
                      "the graph has stopped)")
@@ -171,6 +201,8 @@ def run_foreground(spec: GraphSpec, out: TextIO = sys.stdout) -> int:
 
                 g.start("recorder_node", out_dir=str(Path(spec.record).resolve()))
                 g.wait_for_log("recorder_node", READY, RECORDER_START_S)
+            if "foxglove_node" in params:
+                start_foxglove(g, params.pop("foxglove_node"))  # its URL line comes with the log tail
             for node, p in params.items():
                 g.start(node, **p)
             logs = {name: proc.log_path for name, proc in g.procs.items()}
