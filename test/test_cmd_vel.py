@@ -229,7 +229,7 @@ def test_a_twist_drives_the_in_process_robot_and_the_timeout_stops_it():
     """The follower as cpg_node applies it, on the simulated robot (experiments/cmd_vel.py run_drive):
     0.06 m/s with a 0.1 rad/s left turn from 10 s; the speed over 14.8-22 s is the command within 10 %,
     the robot turns left, and after the last Twist (22 s) the timeout stops it: the base moves < 1 cm/s
-    within 2.5 s and stays upright."""
+    within the packaged timeout + 2 s (the α filter) and stays upright."""
     from cpg_walker.experiments.cmd_vel import Drive, run_drive
 
     m = run_drive(Drive("t", ((22.0, 0.06, 0.1),), tail_s=5.0))
@@ -237,4 +237,21 @@ def test_a_twist_drives_the_in_process_robot_and_the_timeout_stops_it():
     (seg,) = m["segments"]
     assert seg["speed_mps"] == pytest.approx(0.06, rel=0.1), seg
     assert seg["turn_rate_rad_s"] > 0.02, seg
-    assert m["speed_below_1cm_s_after_s"] is not None and m["speed_below_1cm_s_after_s"] <= 2.5, m
+    stop = m["speed_below_1cm_s_after_s"]
+    assert stop is not None and CmdVelLimits.load().timeout < stop <= CmdVelLimits.load().timeout + 2.0, m
+
+
+def test_packaged_timeout_keeps_following_a_one_hertz_sender():
+    """`ros2 topic pub` (and `cpg-walker topic pub`) send 1 Hz by default: with the packaged timeout a
+    Twist every 1.1 s (1 Hz, late by 10 %) keeps the robot following, never timed out (with
+    diff_drive's 0.5 s it stopped and restarted every second and fell in the graph); 0.1 s after the
+    timeout without a Twist it stops stepping."""
+    lim = CmdVelLimits.load()
+    f = CmdVelFollower(SpeedMap.load(), lim, zeta=1.0)
+    t = 10.0
+    for _ in range(10):
+        f.command(t, 0.085, 0.1)
+        for dt in (0.002, 0.5, 1.098):
+            assert f.update(t + dt, 1.0, 1.0).state == "following", (t, dt)
+        t += 1.1
+    assert f.update(t - 1.1 + lim.timeout + 0.1, 1.0, 1.0).state == "timed_out"
