@@ -4,6 +4,7 @@ heading anti-windup of the feedback controller."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -25,7 +26,7 @@ from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
 
 def limits(**kw) -> CmdVelLimits:
     base = {"timeout": 0.5, "max_linear_x": 0.11, "min_linear_x": -0.1, "max_angular_z": 0.15,
-            "stand_below": 0.005}
+            "stand_below": 0.005, "alpha_fall_rate": 1000.0}  # 1000: α drops within a tick
     return CmdVelLimits(**{**base, **kw})
 
 
@@ -100,7 +101,8 @@ def test_bad_map_data_is_refused_naming_the_key(change, why):
 def test_limits_are_validated():
     for kw, why in (({"timeout": 0.0}, "timeout"), ({"timeout": math.nan}, "finite"),
                     ({"max_linear_x": -0.1}, "max_linear_x"), ({"min_linear_x": 0.1}, "min_linear_x"),
-                    ({"max_angular_z": 2.0}, "max_angular_z"), ({"stand_below": -1.0}, "stand_below")):
+                    ({"max_angular_z": 2.0}, "max_angular_z"), ({"stand_below": -1.0}, "stand_below"),
+                    ({"alpha_fall_rate": 0.0}, "alpha_fall_rate")):
         with pytest.raises(ValueError, match=why):
             limits(**kw)
     lim = limits()
@@ -125,6 +127,32 @@ def test_follower_follows_times_out_and_resumes():
     assert f.update(12.102, 1.0, 0.4) == CmdVelOutput(1.0, 0.0, 0.0, "standing")
     f.command(12.2, 0.2, 1.0)  # clamped to the limits
     assert f.update(12.202, 1.0, 0.0) == CmdVelOutput(1.5, 1.0, 0.15, "following")
+
+
+def test_alpha_command_falls_at_most_alpha_fall_rate():
+    """A stop (timeout, standing, a slower command) lowers the α command linearly at
+    ``alpha_fall_rate`` per sim s, whatever the tick spacing; a rise is not limited by it; a new
+    command during the fall takes over from where the α command is."""
+    m = SpeedMap(toy_map())
+    f = CmdVelFollower(m, limits(alpha_fall_rate=0.5), zeta=1.0)
+    f.command(10.0, 0.08, 0.0)
+    assert f.update(10.002, 1.0, 1.0).alpha == 1.0
+    t, a = 11.6, []  # timed out from 10.5 on: the α command is 1 until then, then falls 0.5 / s
+    while t < 14.0:
+        a.append((t, f.update(t, 1.0, 1.0).alpha))
+        t += 0.013
+    assert f.state == "timed_out"
+    for (t0, a0), (t1, a1) in itertools.pairwise(a):
+        assert a1 == pytest.approx(max(a0 - 0.5 * (t1 - t0), 0.0))
+    assert a[0][1] == pytest.approx(1.0 - 0.5 * (11.6 - 10.002)) and a[-1][1] == 0.0
+    f.command(14.0, 0.1, 0.0)  # resumes: α up at once (rises are not limited by this)
+    assert f.update(14.002, 1.0, 0.0).alpha == 1.0
+    slow = m.command(0.04, f.limits)[1]
+    assert 0.3 < slow < 0.7
+    f.command(14.1, 0.04, 0.0)  # slower: α 1 -> slow at 0.5 / s
+    assert f.update(14.5, 1.0, 1.0).alpha == pytest.approx(1.0 - 0.5 * 0.498)
+    f.command(15.5, 0.04, 0.0)
+    assert f.update(15.6, 1.0, 1.0).alpha == pytest.approx(slow)
 
 
 def test_reversal_stops_stepping_before_the_zeta_sign_flips():
@@ -229,7 +257,8 @@ def test_a_twist_drives_the_in_process_robot_and_the_timeout_stops_it():
     """The follower as cpg_node applies it, on the simulated robot (experiments/cmd_vel.py run_drive):
     0.06 m/s with a 0.1 rad/s left turn from 10 s; the speed over 14.8-22 s is the command within 10 %,
     the robot turns left, and after the last Twist (22 s) the timeout stops it: the base moves < 1 cm/s
-    within the packaged timeout + 2 s (the α filter) and stays upright."""
+    within the packaged timeout + the α fall (1 / alpha_fall_rate) + 2 s (the α filter) and stays
+    upright."""
     from cpg_walker.experiments.cmd_vel import Drive, run_drive
 
     m = run_drive(Drive("t", ((22.0, 0.06, 0.1),), tail_s=5.0))
@@ -238,7 +267,8 @@ def test_a_twist_drives_the_in_process_robot_and_the_timeout_stops_it():
     assert seg["speed_mps"] == pytest.approx(0.06, rel=0.1), seg
     assert seg["turn_rate_rad_s"] > 0.02, seg
     stop = m["speed_below_1cm_s_after_s"]
-    assert stop is not None and CmdVelLimits.load().timeout < stop <= CmdVelLimits.load().timeout + 2.0, m
+    lim = CmdVelLimits.load()
+    assert stop is not None and lim.timeout < stop <= lim.timeout + 1.0 / lim.alpha_fall_rate + 2.0, m
 
 
 def test_packaged_timeout_keeps_following_a_one_hertz_sender():

@@ -77,11 +77,15 @@ def test_cmd_vel_follow_timeout_resume_and_bad_input(graph, probe):
     sending["twist"] = None  # the sender stops: the timeout stops stepping
     t_stop, v = until(lambda v: v["cmd_vel"] == "timed_out", "timed out", t_f)
     t_last = last_sent["t"]
-    assert v["alpha_command"] == "0" and float(v["cmd_vel_turn_rate"]) == 0.0
+    assert float(v["alpha_command"]) < 1.0 and float(v["cmd_vel_turn_rate"]) == 0.0  # falling, no turn
     # a Twist is timed by the tick the node has when it arrives (t_last: the tick after the last send, or
     # one before it); the diagnostics come every 0.1 sim s
     assert limits.timeout - 2 * stand_in.dt <= t_stop - t_last <= limits.timeout + 0.1 + 2 * stand_in.dt, \
         (t_stop, t_last)
+    # the α command falls at cmd_vel.alpha_fall_rate: 0 after 1 / rate (+ a diagnostics period)
+    t_zero, _ = until(lambda v: v["alpha_command"] == "0", "the alpha command 0", t_stop)
+    assert t_zero - (t_last + limits.timeout) <= 1.0 / limits.alpha_fall_rate + 0.1 + 2 * stand_in.dt, \
+        (t_zero, t_last)
     t_low, _ = until(lambda v: float(v["alpha"]) < 0.05, "the applied alpha near 0", t_stop)
     alphas = [float(v["alpha"]) for t, v, _ in diags() if t_stop <= t <= t_low]
     assert all(b <= a for a, b in itertools.pairwise(alphas)) and alphas[0] > 0.5, alphas  # smooth

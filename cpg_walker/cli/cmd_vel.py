@@ -42,9 +42,9 @@ def _drive(args: argparse.Namespace) -> int:
     if args.graph:
         from cpg_walker.experiments.cmd_vel_graph import drive_graph
 
-        drive_graph(args.out, args.domain_id, args.attach)
+        res = drive_graph(args.out, args.domain_id, args.attach)
         print(open(f"{args.out}/drive_graph.md", encoding="utf-8").read())
-        return 0
+        return 1 if res["fell"] else 0
     from cpg_walker.experiments.cmd_vel import drive_check, drive_set
     from cpg_walker.progress import Progress
 

@@ -92,6 +92,7 @@ class Drive:
     reverse_via_stop: bool = True  # the follower's reversal procedure (False: ζ flipped at once)
     alpha_rate: float | None = None  # the follower's limit on every rise of the α command (per sim s)
     reverse_alpha_rate: float | None = REVERSE_ALPHA_RATE  # ... on the rise after a reversal
+    alpha_fall_rate: float | None = None  # cmd_vel.alpha_fall_rate (None: config/cpg.yaml's)
 
 
 def drive_set(quick: bool = False) -> list[Drive]:
@@ -165,7 +166,8 @@ def run_drive(drive: Drive, map_file: str | None = None) -> dict:
     from cpg_walker.walker.loop import run_replay
 
     smap = SpeedMap.load(map_file or default_map_file())
-    limits = CmdVelLimits.load()
+    limits = CmdVelLimits.load(**({} if drive.alpha_fall_rate is None
+                                  else {"alpha_fall_rate": drive.alpha_fall_rate}))
     ctrl = _controller()
     fb = FeedbackController(FeedbackConfig.load())
     src = FeedbackGaitSource(ctrl, fb)

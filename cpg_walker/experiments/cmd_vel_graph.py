@@ -5,7 +5,8 @@ geometry_msgs/Twist on /cmd_vel at 10 Hz of sim time (forward, forward + left, f
 nothing: the timeout) and measure from /odom/ground_truth: the forward speed (displacement along the
 stride-mean heading, 1 s pieces), the turn rates (a line fitted to the unwrapped yaw over each window: the
 within-stride sway averages out) and the stop after the last command (when the base moves < 1 cm in 1 s);
-cpg_node's /diagnostics give the time its cmd_vel state turned ``timed_out``. DIR/drive_graph.json, .md.
+cpg_node's /diagnostics give the time its cmd_vel state turned ``timed_out``, the sim's latched /sim/fallen
+whether and about when (the newest odometry then) the robot fell. DIR/drive_graph.json, .md.
 """
 
 from __future__ import annotations
@@ -44,7 +45,9 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
+    from std_msgs.msg import Bool
 
     from cpg_walker.nodes.graph import isolated_env, quiet_domain_id
 
@@ -65,6 +68,11 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     node = rclpy.create_node("drive_check", context=ctx, start_parameter_services=False)
     odom: list[tuple[float, float, float, float]] = []
     cmd_state: list[tuple[float, str]] = []
+    fallen: list[float] = []  # sim s (the newest odometry) when /sim/fallen said true
+
+    def on_fallen(m: Bool) -> None:
+        if m.data and not fallen:
+            fallen.append(odom[-1][0] if odom else float("nan"))
 
     def on_odom(m: Odometry) -> None:
         p = m.pose.pose
@@ -80,6 +88,8 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
 
     node.create_subscription(Odometry, "/odom/ground_truth", on_odom, 200)
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
+    node.create_subscription(Bool, "/sim/fallen", on_fallen, QoSProfile(
+        depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE))
     pub = node.create_publisher(Twist, "/cmd_vel", 10)
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
@@ -91,6 +101,8 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     try:
         while time.monotonic() < end_wall:
             executor.spin_once(timeout_sec=0.01)
+            for _ in range(50):  # the backlog too: the sim time seen here is the newest odometry's
+                executor.spin_once(timeout_sec=0.0)
             if proc is not None and proc.poll() is not None:
                 break
             if not odom:
@@ -129,6 +141,8 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     if t0 is None or not sent:
         raise RuntimeError(f"no /odom/ground_truth from the graph on domain {domain} (see {out}/graph.log)")
     res = measure(np.array(odom), t0, sent, cmd_state)
+    res["fell"] = bool(fallen)
+    res["fell_at_s"] = round(fallen[0], 2) if fallen else None
     res.update(domain_id=domain, attached=attach, plan=[list(p) for p in PLAN], stop_s=STOP_S,
                first_command_s=t0)
     (out / "drive_graph.json").write_text(json.dumps(res, indent=2) + "\n")
@@ -190,4 +204,10 @@ def markdown(res: dict) -> str:
     lines.append(f"Last command at sim {res['last_command_s']:.2f} s; cpg_node timed out "
                  f"{res['timed_out_after_s']} s after it; the base moved < 1 cm/s from "
                  f"{res['stopped_after_s']} s after it.")
+    if res.get("fell"):
+        at = res["fell_at_s"]
+        lines.append(f"The robot FELL (/sim/fallen): reported at about sim {at} s "
+                     f"({at - res['last_command_s']:+.2f} s from the last command).")
+    else:
+        lines.append("No fall (/sim/fallen stayed false).")
     return "\n".join(lines) + "\n"

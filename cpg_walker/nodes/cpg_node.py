@@ -127,6 +127,8 @@ CMD_VEL_PARAMS = (
     ("min_linear_x", "most negative (backward) linear.x followed (m/s; smaller is clamped)", -1.0, 0.0),
     ("max_angular_z", "largest |angular.z| followed (rad/s; larger is clamped)", 0.0, 1.0),
     ("stand_below", "|linear.x| below this (m/s): stand (alpha 0)", 0.0, 0.1),
+    ("alpha_fall_rate", "the alpha command falls at most this much per sim s (a stop takes 1/rate s)",
+     0.01, 100.0),
 )
 assert tuple(k for k, *_ in CMD_VEL_PARAMS) == LIMIT_KEYS
 
@@ -398,6 +400,7 @@ class CPGNode(Node):
         self.cmd_override = False  # a zeta/alpha parameter set while following: holds until the next Twist
         self.cmd_stats = {"received": 0, "dropped": 0, "ignored": 0}
         self.cmd_out = None  # the follower's last output (CmdVelOutput)
+        self._cmd_logged: tuple | None = None  # (state, target) last logged
         self.cmd_turn = "ok"  # ok | why angular.z cannot turn the robot
 
     def _controller(self, cpg_file: str, n: int | None) -> tuple[HumanoidCPG, str, bool]:
@@ -621,9 +624,11 @@ class CPGNode(Node):
             self.throttle.warn(self, "/cmd_vel turn in place", f"/cmd_vel angular.z {want:g} rad/s with "
                                "linear.x ~ 0: the robot turns only while stepping; it stands")
         apply_output(self.ctrl, fb, out)
-        if prev is None or (prev.zeta, prev.alpha, prev.state) != (out.zeta, out.alpha, out.state):
+        key = (out.state, self.cmd.target)  # not each tick of an alpha ramp: a new state or command
+        if prev is None or key != self._cmd_logged:
             self.get_logger().info(f"/cmd_vel {out.state}: zeta {out.zeta:.3g}, alpha {out.alpha:.3g}, turn "
                                    f"{out.turn_rate:.3g} rad/s at sim {t_ns / 1e9:.3f} s")
+            self._cmd_logged = key
         self.cmd_out = out
 
     def _cmd_vel_values(self, t_ns: int) -> dict[str, str]:

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 #: keys of a CmdVelLimits (and of cpg_node's ``cmd_vel.<key>`` parameters)
-LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand_below")
+LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand_below", "alpha_fall_rate")
 
 
 def _read_yaml(path: str | Path | None, default: str) -> tuple[dict, Path]:
@@ -191,13 +191,16 @@ class SpeedMap:
 class CmdVelLimits:
     """The /cmd_vel limits (cpg_node's ``cmd_vel.*`` parameters; defaults in config/cpg.yaml):
     ``timeout`` sim s, linear.x in [min_linear_x, max_linear_x] m/s, |angular.z| <= max_angular_z rad/s,
-    |linear.x| < stand_below -> stand (α 0)."""
+    |linear.x| < stand_below -> stand (α 0), the α command falls at most ``alpha_fall_rate`` per sim s
+    (a stop — timeout, standing, reversal — takes 1 / alpha_fall_rate s: the robot decelerates over
+    strides instead of freezing mid-stride; measured, README "Driving with /cmd_vel")."""
 
     timeout: float
     max_linear_x: float
     min_linear_x: float
     max_angular_z: float
     stand_below: float
+    alpha_fall_rate: float
 
     def __post_init__(self) -> None:
         for k in LIMIT_KEYS:
@@ -213,6 +216,8 @@ class CmdVelLimits:
             raise ValueError(f"cmd_vel.max_angular_z must be in [0, 1] rad/s, got {self.max_angular_z}")
         if not self.stand_below >= 0:
             raise ValueError(f"cmd_vel.stand_below must be >= 0, got {self.stand_below}")
+        if not self.alpha_fall_rate > 0:
+            raise ValueError(f"cmd_vel.alpha_fall_rate must be > 0 per s, got {self.alpha_fall_rate}")
 
     @classmethod
     def load(cls, path: str | Path | None = None, **overrides: float) -> CmdVelLimits:
@@ -340,6 +345,8 @@ class CmdVelFollower:
         return self._out(t, z, a, w)
 
     def _out(self, t: float, z: float, a: float, w: float) -> CmdVelOutput:
+        if a < self._alpha_out:  # the α command falls at most limits.alpha_fall_rate per sim s
+            a = max(a, self._alpha_out - self.limits.alpha_fall_rate * max(t - self._t_prev, 0.0))
         self._t_prev, self._alpha_out = t, a
         return CmdVelOutput(z, a, w, self.state)
 
