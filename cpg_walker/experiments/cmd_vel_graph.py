@@ -50,12 +50,16 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     from std_msgs.msg import Bool
 
     from cpg_walker.nodes.graph import isolated_env, quiet_domain_id
+    from cpg_walker.nodes.graph_runner import resolve_domain
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     if attach and domain_id is None:
-        domain_id = int(os.environ.get("ROS_DOMAIN_ID", "0"))
-    domain = quiet_domain_id() if domain_id is None else int(domain_id)
+        env = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
+        if not env.isdigit():
+            raise ValueError(f"ROS_DOMAIN_ID must be an integer, got {env!r}")
+        domain_id = int(env)
+    domain = quiet_domain_id() if domain_id is None else resolve_domain(int(domain_id))[0]  # 0..232
     total = sum(p[1] for p in PLAN) + STOP_S
     proc = None
     if not attach:
