@@ -31,6 +31,8 @@ STOP_S = 8.0
 #: A fresh graph: the first Twist at this sim time (the CPG has taken over the recording at ~6.6 s).
 START_S = 8.0
 RATE_HZ = 10.0
+#: wall s without /odom/ground_truth after which the drive gives up (the graph is not there or stopped)
+NO_ODOM_S = 30.0
 
 
 def _yaw(q) -> float:
@@ -100,6 +102,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     sent: list[tuple[float, float, float]] = []
     t0 = None
     end_wall = time.monotonic() + wall_limit_s
+    seen, stalled = [0, time.monotonic()], False  # [odometry messages, wall time the count last grew]
     next_pub = 0.0
     last_report = 0.0
     try:
@@ -108,6 +111,11 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
             for _ in range(50):  # the backlog too: the sim time seen here is the newest odometry's
                 executor.spin_once(timeout_sec=0.0)
             if proc is not None and proc.poll() is not None:
+                break
+            if len(odom) != seen[0]:
+                seen[:] = [len(odom), time.monotonic()]
+            elif time.monotonic() - seen[1] > NO_ODOM_S:  # the graph is gone (or was never there)
+                stalled = True
                 break
             if not odom:
                 continue
@@ -142,8 +150,12 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
                 except subprocess.TimeoutExpired:
                     os.killpg(proc.pid, signal.SIGKILL)
                     proc.wait()
+    where = f"see {out}/graph.log" if proc is not None else "is a graph running there?"
     if t0 is None or not sent:
-        raise RuntimeError(f"no /odom/ground_truth from the graph on domain {domain} (see {out}/graph.log)")
+        raise ValueError(f"no /odom/ground_truth from a graph on DDS domain {domain} ({where})")
+    if stalled:
+        raise ValueError(f"/odom/ground_truth on DDS domain {domain} stopped for {NO_ODOM_S:g} s at sim "
+                         f"{odom[-1][0]:.1f} s, before the plan's end ({where})")
     res = measure(np.array(odom), t0, sent, cmd_state)
     res["fell"] = bool(fallen)
     res["fell_at_s"] = round(fallen[0], 2) if fallen else None
