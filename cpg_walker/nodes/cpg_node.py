@@ -115,8 +115,9 @@ parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N wh
   feedback_fade (sim s), sensor_wait (wall s) - all settable at run time, validated; lockstep (wait for
   each tick's sensor samples); cmd_vel.follow, cmd_vel.timeout (sim s), cmd_vel.max_linear_x,
   cmd_vel.min_linear_x (m/s), cmd_vel.max_angular_z (rad/s), cmd_vel.stand_below (m/s),
-  cmd_vel.speed_map (file) - settable at run time, validated; a zeta/alpha set while following /cmd_vel
-  holds until the next /cmd_vel message. /diagnostics adds cmd_vel (off | waiting | following | standing
+  cmd_vel.alpha_fall_rate (per sim s: alpha falls at most this fast), cmd_vel.speed_map (file) - settable
+  at run time, validated; a zeta/alpha set while following /cmd_vel holds until the next /cmd_vel message.
+  /diagnostics adds cmd_vel (off | waiting | following | standing
   | reversing | ramping | timed_out | parameters), the last command, its zeta/alpha/turn rate,
   cmd_vel_turn (ok, or why angular.z cannot turn: feedback off, no heading pathway, standing; WARN)"""
 
