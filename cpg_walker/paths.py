@@ -37,6 +37,15 @@ def config_path(name: str) -> Path:
     return path
 
 
+def yaml_error(path: str | Path, exc: Exception) -> str:
+    """One line for a YAML file the parser refused: the file, the line and column where it stopped (when
+    the parser gives them) and its reason, e.g. ``cpg.yaml:3:5: not valid YAML: expected ',' or ']'``."""
+    mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+    where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark is not None else str(path)
+    problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+    return f"{where}: not valid YAML: {problem}"
+
+
 def ros_parameters(file: str | Path, node: str) -> dict:
     """The ``ros__parameters`` of ``node`` in a ROS 2 parameters file (a bare name: in config/; else a
     path),
@@ -51,7 +60,10 @@ def ros_parameters(file: str | Path, node: str) -> dict:
     if len(path.parts) == 1 and not path.is_absolute():
         path = config_path(str(file))
     with open(path, encoding="utf-8") as fh:
-        doc = yaml.safe_load(fh)
+        try:
+            doc = yaml.safe_load(fh)
+        except yaml.YAMLError as exc:
+            raise ValueError(yaml_error(path, exc)) from None
     section = doc.get(node) if isinstance(doc, dict) else None
     params = section.get("ros__parameters") if isinstance(section, dict) else None
     if not isinstance(params, dict):

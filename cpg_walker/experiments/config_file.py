@@ -7,6 +7,8 @@ from pathlib import Path
 
 import yaml
 
+from cpg_walker.paths import yaml_error
+
 
 class ConfigError(ValueError):
     """A bad configuration entry (the message names file, line and key)."""
@@ -22,7 +24,7 @@ class Config:
             node = yaml.compose(text)
             self.data = yaml.safe_load(text)
         except yaml.YAMLError as exc:
-            raise ConfigError(f"{self.path}: not valid YAML: {exc}") from None
+            raise ConfigError(yaml_error(self.path, exc)) from None
         if not isinstance(self.data, dict):
             raise ConfigError(f"{self.path}: expected a mapping at the top level")
         self.lines: dict[tuple, int] = {}

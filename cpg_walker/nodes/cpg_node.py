@@ -105,7 +105,7 @@ publishes:
     every horizon_step up to horizon (the forecast)
   /diagnostics (diagnostic_msgs/DiagnosticArray, every monitor_period): status 'cpg_walker/cpg' with
     state (learning | converged | starting | walking), zeta, alpha (commanded and applied), N, overruns,
-    feedback (off | active | fading | stale), feedback_weight, sensor_age_s, sensors_dropped
+    feedback (off | active | fading | stale), feedback_weight, sensor_age_s, sensors_dropped, clock_dropped
 parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N when learning; 0 = the
   learning settings'), zeta [-2, 2] and alpha [0, 2] (settable at run time), lookahead, monitor_period
   (sim s), horizon and horizon_step (sim s; horizon 0 = no /joint_trajectory), realtime_priority, nice,
@@ -155,6 +155,9 @@ def turn_unavailable(enabled: bool, weight: float, pathways: tuple[str, ...]) ->
     return ""
 
 
+#: A /clock tick more than this past the last one is taken only once the next tick confirms it (a stray
+#: far-future stamp would otherwise freeze the walk; see CPGNode._clock_jump).
+CLOCK_JUMP_NS = 1_000_000_000
 #: Sensor samples kept per topic, by stamp (lockstep takes the one stamped like its tick).
 SENSOR_KEEP = 32
 #: FeedbackConfig field types exposed as ROS parameters, and their parameter descriptors' makers.
@@ -370,7 +373,8 @@ class CPGNode(Node):
         self.buffers = [self.imu, *self.loads]
         self.waiting: deque[tuple[int, float]] = deque()  # lockstep: ticks waiting for their samples
         self.sensors_gave_up = False  # a lockstep wait timed out: no waiting until the samples catch up
-        self.sensor_stats = {"dropped": 0, "wait_timeouts": 0}
+        self.sensor_stats = {"dropped": 0, "wait_timeouts": 0, "clock_dropped": 0}
+        self.clock_jump_ns: int | None = None  # a tick far ahead of the last, awaiting confirmation
         self.fb_state = self.fade.state(self.fb_enabled)
         self.fb_age: float | None = None
         subs = [self.create_subscription(Clock, "/clock", self._on_clock, 100),
@@ -668,6 +672,8 @@ class CPGNode(Node):
     # ---------------------------------------------------------------- clock
     def _on_clock(self, msg: Clock) -> None:
         t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
+        if self._clock_jump(t_ns):
+            return
         if self.last_tick_ns is not None and t_ns <= self.last_tick_ns:
             self._tick(t_ns)  # a re-sent (or old) tick: its targets again, from the cache
             return
@@ -675,6 +681,22 @@ class CPGNode(Node):
             return
         self.waiting.append((t_ns, time.monotonic()))
         self._run_waiting()
+
+    def _clock_jump(self, t_ns: int) -> bool:
+        """Whether to drop the tick t_ns as a stray: more than CLOCK_JUMP_NS past the last tick, and not
+        (yet) confirmed by a tick continuing from it within CLOCK_JUMP_NS. One /clock sample far in the
+        future (a corrupt stamp, a second publisher) would otherwise end the walk: every real tick after
+        it would look old. A real jump (the node stalled longer) is taken one tick later."""
+        last, seen = self.last_tick_ns, self.clock_jump_ns
+        if last is None or t_ns - last <= CLOCK_JUMP_NS or (seen is not None
+                                                            and 0 < t_ns - seen <= CLOCK_JUMP_NS):
+            self.clock_jump_ns = None
+            return False
+        self.clock_jump_ns = t_ns
+        self.sensor_stats["clock_dropped"] += 1
+        self.throttle.warn(self, "/clock jump", f"dropped /clock {t_ns / 1e9:.9g} s: more than "
+                           f"{CLOCK_JUMP_NS / 1e9:g} s past the last tick {last / 1e9:.9g} s, unconfirmed")
+        return True
 
     def _run_waiting(self) -> None:
         """Run the queued ticks, in order, whose sensor samples are there (or need not be waited for)."""
@@ -853,7 +875,8 @@ class CPGNode(Node):
                 "sensor_age_s": "none" if self.fb_age is None else f"{self.fb_age:.3f}",
                 "feedback_pathways": ",".join(fb.pathways), "phase_resets": str(len(fb.resets)),
                 "sensors_dropped": str(self.sensor_stats["dropped"]),
-                "sensor_wait_timeouts": str(self.sensor_stats["wait_timeouts"])}
+                "sensor_wait_timeouts": str(self.sensor_stats["wait_timeouts"]),
+                "clock_dropped": str(self.sensor_stats["clock_dropped"])}
 
     def _diagnostics(self, t_ns: int, feedback: dict[str, str] | None = None) -> None:
         ok = self.stage != "learning" and getattr(self, "converged", True)

@@ -321,14 +321,21 @@ def _read_rosbag2(d: Path, topics: list[str] | None) -> dict[str, list[tuple[int
 
 
 def _read_mcap(p: Path, topics: list[str] | None) -> dict[str, list[tuple[int, Any]]]:
+    import struct
+
+    from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
     store = typestore()
     out: dict[str, list[tuple[int, Any]]] = {}
     with open(p, "rb") as f:
-        for schema, channel, message in make_reader(f).iter_messages(topics=topics, log_time_order=True):
-            if channel.message_encoding != "cdr" or schema is None:
-                continue
-            out.setdefault(channel.topic, []).append(
-                (message.log_time, deserialize(store, message.data, schema.name)))
+        try:
+            for schema, channel, message in make_reader(f).iter_messages(topics=topics, log_time_order=True):
+                if channel.message_encoding != "cdr" or schema is None:
+                    continue
+                out.setdefault(channel.topic, []).append(
+                    (message.log_time, deserialize(store, message.data, schema.name)))
+        except (OSError, EOFError, ValueError, struct.error, McapError) as exc:
+            raise ValueError(f"{p}: not a readable MCAP recording (truncated or corrupt: "
+                             f"{type(exc).__name__}: {exc})") from None
     return out

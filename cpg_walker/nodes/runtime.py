@@ -444,6 +444,7 @@ def declare(node: Node, name: str, descriptor: ParameterDescriptor) -> object:
     from rclpy.exceptions import ParameterUninitializedException
     from rclpy.parameter import Parameter
 
+    name_refusals(node)
     packaged = packaged_parameters(node)
     if name in packaged and name not in node._parameter_overrides:
         node.declare_parameter(name, packaged[name], descriptor)
@@ -458,6 +459,27 @@ def declare(node: Node, name: str, descriptor: ParameterDescriptor) -> object:
     except ParameterUninitializedException:
         raise ValueError(f"parameter {name!r} of /{node.get_name()} has no value: start the node with "
                          f"--ros-args --params-file {params_file(node.get_name())}") from None
+
+
+def name_refusals(node: Node) -> None:
+    """Make every refused parameter change say which parameter it refused: rclpy's own checks answer a
+    wrong type ("Wrong parameter type, expected ...") or an undeclare without the name, so a client setting
+    several at once could not tell which. Wraps the node's ``set_parameters_atomically`` (what the
+    set_parameters services call), once; reasons that already name the parameter are kept as they are."""
+    if getattr(node, "_refusals_named", False):
+        return
+    node._refusals_named = True
+    plain = node.set_parameters_atomically
+
+    def set_parameters_atomically(parameters):
+        result = plain(parameters)
+        if not result.successful:
+            names = [p.name for p in parameters if p.name not in result.reason]
+            if len(names) == len(parameters):  # none named yet
+                result.reason = f"{', '.join(names)}: {result.reason or 'refused'}"
+        return result
+
+    node.set_parameters_atomically = set_parameters_atomically
 
 
 def packaged_parameters(node: Node) -> dict:

@@ -208,6 +208,7 @@ class SimNode(Node):
         self.held_stamp: int | None = None  # after a wait gave up: the held torque's stamp (no more
         #                                     waits until a newer torque arrives)
         self.resends = 0
+        self.torques_rejected = 0  # malformed /joint_torques, or stamped ahead of the sim time
         self.torque_age: list[int] = []
         self.fallen = False
         self.k = 0
@@ -247,10 +248,16 @@ class SimNode(Node):
         try:
             cmd = read_joint_command(msg, require="effort")
         except ValueError as exc:
+            self.torques_rejected += 1
             self.throttle.warn(self, reason_key(exc),
                                f"rejected /joint_torques: {exc}")
             return
         t = stamp_ns(msg)
+        if t > self.k * self.period_ns:  # answers a state not yet published: a corrupt or foreign stamp,
+            self.torques_rejected += 1   # which would otherwise make every real torque after it look old
+            self.throttle.warn(self, "future stamp", f"rejected /joint_torques stamped {t / 1e9:.9g} s, "
+                               f"ahead of the sim time {self.k * self.period_ns / 1e9:.9g} s")
+            return
         if t < self.tau_stamp:
             return  # an older answer arriving late: ignore
         if t != self.tau_stamp:
@@ -344,7 +351,8 @@ class SimNode(Node):
             ("fall_criterion", f"torso z < {self.sim.min_torso_height} m or tilt > "
                                f"{self.sim.max_tilt_deg} deg"),
             ("late_commands", self.late), ("late_recent", self.late_recent),
-            ("late_waited", self.late_waited), ("late_held", self.late_held), ("resends", self.resends))]
+            ("late_waited", self.late_waited), ("late_held", self.late_held), ("resends", self.resends),
+            ("torques_rejected", self.torques_rejected))]
         msg = DiagnosticArray(status=[st])
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
         self.pub_diag.publish(msg)

@@ -11,6 +11,7 @@ import numpy as np
 import yaml
 
 from cpg_walker.cpg.network import CPGParams
+from cpg_walker.paths import yaml_error
 from cpg_walker.walker.controller import CHAIN, DOFS, HIP2_PAIR, LEG_PHASE, B, HumanoidCPG, HumanoidSettings
 
 SCHEMA_VERSION = 1
@@ -67,7 +68,7 @@ def load(path: str | Path) -> HumanoidCPG:
     try:
         d = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
-        raise ValueError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+        raise ValueError(yaml_error(path, exc)) from None
     return from_dict(d, str(path))
 
 

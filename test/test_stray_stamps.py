@@ -1,0 +1,82 @@
+"""The two defects the fuzzing (test_ros_fuzz.py) found, as plain in-process tests of the nodes' handlers:
+a stray future stamp on /joint_torques or /clock must not freeze the walk. Apart from the fuzz module, so
+they do not run beside its real-time graph."""
+
+from __future__ import annotations
+
+import pytest
+
+from cpg_walker.robot.joints import JOINT_NAMES
+
+pytestmark = pytest.mark.ros
+
+def _in_process(make):
+    """A context of its own on a random domain, and the node ``make(context)``."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    from cpg_walker.nodes.graph import random_domain_id
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=random_domain_id(), signal_handler_options=SignalHandlerOptions.NO)
+    return ctx, make(ctx)
+
+
+def test_sim_refuses_a_torque_stamped_ahead_of_its_time(monkeypatch):
+    """Defect: one /joint_torques stamped in the future became the held torque for good (every real answer
+    after it looked older and was ignored)."""
+    import numpy as np
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import JointState
+
+    from cpg_walker.nodes import sim_node
+    from cpg_walker.nodes.runtime import params_file
+    from cpg_walker.nodes.sim_node import SimNode
+
+    contexts = []  # sim_node makes its executor in rclpy's default context: here in the node's own
+    monkeypatch.setattr(sim_node, "SingleThreadedExecutor",
+                        lambda: SingleThreadedExecutor(context=contexts[0]))
+
+    def make(ctx):
+        contexts.append(ctx)
+        return SimNode(context=ctx, cli_args=["--ros-args", "--params-file", str(params_file("sim"))])
+
+    ctx, node = _in_process(make)
+    try:
+        def torque(sec: int, value: float) -> JointState:
+            msg = JointState(name=list(JOINT_NAMES), effort=[value] * len(JOINT_NAMES))
+            msg.header.stamp.sec = sec
+            return msg
+
+        node.k = 500  # sim time 1 s
+        node._on_torque(torque(10**6, 5.0))
+        assert node.torques_rejected == 1 and not np.any(node.tau)
+        node._on_torque(torque(1, 1.0))
+        assert node.tau_stamp == 1_000_000_000 and np.all(node.tau == 1.0)
+        node._on_torque(JointState(name=["nope"], effort=[1.0]))
+        assert node.torques_rejected == 2
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+def test_cpg_node_drops_a_stray_clock_jump_and_takes_a_confirmed_one():
+    """Defect: one /clock sample far in the future froze the walk (every real tick after it looked old)."""
+    import rclpy
+
+    from cpg_walker.nodes.cpg_node import CLOCK_JUMP_NS, CPGNode
+    from cpg_walker.nodes.runtime import params_file
+
+    ctx, node = _in_process(lambda ctx: CPGNode(context=ctx, cli_args=[
+        "--ros-args", "--params-file", str(params_file("cpg"))]))
+    try:
+        node.last_tick_ns = 10_000_000_000
+        assert node._clock_jump(2**62) and node.sensor_stats["clock_dropped"] == 1  # stray: dropped
+        assert not node._clock_jump(10_002_000_000)  # the real clock goes on
+        far = 10_000_000_000 + 5 * CLOCK_JUMP_NS
+        assert node._clock_jump(far)  # a real jump: dropped once ...
+        assert not node._clock_jump(far + 2_000_000)  # ... taken when the next tick continues from it
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
