@@ -69,12 +69,15 @@ def nodes(context) -> list:
     cpg = {"use_sim_time": True, "lockstep": pacing == "lockstep",
            **{k: float(arg[k]) for k in ("zeta", "alpha") if arg[k]},
            **({} if feedback is None else {"feedback": feedback})}
+    record = flag("record", arg["record"])
+    # recorded: the sim holds its first state until `ros2 bag record` (node rosbag2_recorder) subscribes
+    waits = {"wait_for_subscriber": "rosbag2_recorder"} if record else {}
     with open(share("urdf", "hoap2.urdf"), encoding="utf-8") as fh:
         description = fh.read()
     out = [
         Node(package=PACKAGE, executable="sim_node", name="sim", output="screen",
              parameters=[params("sim"), {"use_sim_time": True, "pacing": pacing,
-                                         "publish_description": False}]),
+                                         "publish_description": False, **waits}]),
         Node(package=PACKAGE, executable="pid_node", name="pid", output="screen",
              parameters=[params("pid"), {"use_sim_time": True, "lockstep": pacing == "lockstep",
                                          "wait_for_targets": True}]),
@@ -84,7 +87,7 @@ def nodes(context) -> list:
              name="robot_state_publisher", output="screen",
              parameters=[{"robot_description": description, "use_sim_time": True}]),
     ]
-    if flag("record", arg["record"]):
+    if record:
         out.append(ExecuteProcess(
             cmd=["ros2", "bag", "record", "-s", "mcap", "-a", "--use-sim-time",
                  *(["-o", arg["record_dir"]] if arg["record_dir"] else [])],

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.nodes.graph import Graph
+from cpg_walker.nodes.recorder_node import NAME as RECORDER_NAME
 from cpg_walker.nodes.runtime import PACINGS
 
 
@@ -111,8 +112,8 @@ def run_graph(
     parameters); ``attach(graph)``, called once the nodes are started, may start more processes on the
     graph's domain (subscribers, a CPU load) and returns them: they are stopped when the sim has finished.
     ``bag_dir``: record every topic to ``bag_dir/recording.mcap`` (recorder_node, started first and
-    stopped last). ``domain_id``: the graph's DDS domain (None: a free one). Raises RuntimeError (with the
-    sim's log tail) if the sim fails."""
+    stopped last; the sim holds its first state until the recorder subscribes to it). ``domain_id``: the
+    graph's DDS domain (None: a free one). Raises RuntimeError (with the sim's log tail) if the sim fails."""
     from cpg_walker.robot.run_record import RunRecord
 
     if pacing not in PACINGS:
@@ -131,8 +132,9 @@ def run_graph(
         if target is not None:
             g.start(target, **(target_params or {}), **more.get(target, {}))
         period = {} if control_period is None else {"control_period": float(control_period)}
+        waits = {} if bag_dir is None else {"wait_for_subscriber": RECORDER_NAME}  # bag from t = 0
         g.start("sim_node", pacing=pacing, duration=float(duration), stop_on_fall=stop_on_fall,
-                record_path=str(record_path), **period, **more.get("sim_node", {}))
+                record_path=str(record_path), **period, **waits, **more.get("sim_node", {}))
         extra = attach(g) if attach is not None else []
         try:
             status = g.wait("sim_node", timeout)

@@ -197,10 +197,12 @@ def run_foreground(spec: GraphSpec, out: TextIO = sys.stdout) -> int:
         try:
             print(banner(domain, how, spec, log_dir), file=out, flush=True)
             if spec.record:
+                from cpg_walker.nodes.recorder_node import NAME as RECORDER_NAME
                 from cpg_walker.nodes.recorder_node import READY
 
                 g.start("recorder_node", out_dir=str(Path(spec.record).resolve()))
                 g.wait_for_log("recorder_node", READY, RECORDER_START_S)
+                params["sim_node"].setdefault("wait_for_subscriber", RECORDER_NAME)  # the bag from t = 0
             if "foxglove_node" in params:
                 start_foxglove(g, params.pop("foxglove_node"))  # its URL line comes with the log tail
             for node, p in params.items():

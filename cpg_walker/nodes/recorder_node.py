@@ -43,6 +43,9 @@ writes: out_dir/recording.mcap (rosbag2 MCAP, ROS 2 CDR) and out_dir/metadata.ya
 parameters: out_dir ('' = ./recording_<UTC date-time>), scan_period (wall s between topic scans),
   queue_depth (messages held per subscription), duration (s of bag time, then stop; 0 = until stopped)"""
 
+#: The node's name (sim_node's ``wait_for_subscriber`` names it when a graph is recorded).
+NAME = "recorder"
+
 #: Log line that says the recorder is subscribed to the graph's topics (Graph.start waits for it).
 READY = "recording to"
 
@@ -60,7 +63,7 @@ class RecorderNode(Node):
     """Subscribes to the graph's topics as they appear and hands their messages to a BagRecorder."""
 
     def __init__(self, **node_options) -> None:
-        super().__init__("recorder", **node_options)
+        super().__init__(NAME, **node_options)
         out_dir = str(declare(self, "out_dir", str_param(
             "directory of the bag (recording.mcap + metadata.yaml); '' = ./recording_<UTC date-time>",
             read_only=True)))

@@ -81,8 +81,8 @@ publishes: /clock (rosgraph_msgs/Clock), /joint_states (sensor_msgs/JointState: 
 subscribes: /joint_torques (sensor_msgs/JointState: name + effort in N*m, stamp = the state it answers)
 services: ~/reset, ~/push (std_srvs/Trigger)
 parameters: pacing (realtime|fast|lockstep), control_period (s), real_time_factor, duration (sim s,
-  0 = run until stopped), publish_description, stop_on_fall, wait_for_controller, lockstep_resend and
-  late_torque_wait (wall s), max_torque_age (sim s), odom_period,
+  0 = run until stopped), publish_description, stop_on_fall, wait_for_controller, wait_for_subscriber,
+  lockstep_resend and late_torque_wait (wall s), max_torque_age (sim s), odom_period,
   diagnostics_period (sim s), imu_variance_floor, push.force [N,N,N], push.body, push.duration (s),
   record_path, record_period (s), realtime_priority, nice, cpu_affinity (OS scheduling, realtime pacing)"""
 
@@ -127,6 +127,9 @@ class SimNode(Node):
                                                                read_only=True)))
         self.wait_first = bool(p("wait_for_controller", bool_param(
             "hold the first period until a torque arrives (every pacing)", read_only=True)))
+        self.wait_subscriber = str(p("wait_for_subscriber", str_param(
+            "hold the first state until this node (e.g. recorder) subscribes to every state topic "
+            "('' = do not wait)", read_only=True)))
         self.resend_s = float(p("lockstep_resend", float_param(
             "wall s without an answer before the state is re-sent", 0.001, 10.0)))
         self.late_wait_s = float(p("late_torque_wait", float_param(
@@ -420,8 +423,32 @@ class SimNode(Node):
             self.executor_.spin_once(timeout_sec=0.0)
             self.next_slow = now + SLOW_SPIN_PERIOD_S
 
+    def state_topics(self) -> list[str]:
+        """The topics of the state published every period (/clock, /joint_states, /imu, /foot_load/*)."""
+        return [pub.topic_name for pub in (self.pub_clock, self.pub_js, self.pub_imu, *self.pub_feet)]
+
+    def _wait_for_subscriber(self) -> bool:
+        """Before the first state: until every node named ``wait_for_subscriber`` (at least one) has a
+        subscription on every state topic (a recorder that finds topics by scanning then has the run from
+        its first period)."""
+        name = self.wait_subscriber
+        while rclpy.ok():
+            nodes = max(1, sum(n == name for n, _ in self.get_node_names_and_namespaces()))
+            missing = [t for t in self.state_topics()  # every node of that name (e.g. a second recorder)
+                       if sum(i.node_name == name for i in self.get_subscriptions_info_by_topic(t)) < nodes]
+            if not missing:
+                self.get_logger().info(f"{name} subscribes to every state topic: starting")
+                return True
+            self.get_logger().info(f"waiting for {name} to subscribe to {', '.join(missing)}",
+                                   throttle_duration_sec=2.0)
+            self.slow_spin(time.perf_counter())
+            time.sleep(0.01)
+        return False
+
     def run(self) -> None:
         lockstep, realtime = self.pacing == "lockstep", self.pacing == "realtime"
+        if self.wait_subscriber and not self._wait_for_subscriber():
+            return
         self.get_logger().info(
             f"pacing={self.pacing} control_period={self.period_ns / 1e9} s physics={self.sim.dt} s "
             f"({self.steps_per_period} steps/period)")
