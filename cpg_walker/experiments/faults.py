@@ -43,6 +43,8 @@ class FaultResult:
     fall_time_s: float | None  # sim time (of the sim run then going; after a sim fault, the new one's)
     walking_again_s: float | None  # sim s from the kill until walking again (sim fault: the new run's t)
     walking_again_wall_s: float | None  # wall s from the kill until walking again
+    up_at_s: float  # sim time the new node was up (its log line UP_LOG; sim fault: 0, the new run)
+    walking_after_up_s: float | None  # sim s from then until walking again (incl. the WINDOW_S)
     speed_before_mps: float
     speed_after_mps: float | None  # over the WINDOW_S at which it counted as walking again
     sim_reset: bool = False  # the sim restarted at t = 0 (the others saw time go back)
@@ -254,6 +256,7 @@ def inject(g: FaultGraph, node: str, before: float, away_wall_s: float, recover_
         fall_time_s=None if not fell else round(g.odom.fell_at, 3),
         walking_again_s=None if at is None else round(at - origin, 3),
         walking_again_wall_s=None if at is None else round(wall, 2),
+        up_at_s=round(start, 3), walking_after_up_s=None if at is None else round(at - start, 3),
         speed_before_mps=round(before, 4),
         speed_after_mps=None if at is None else round(g.odom.speed(), 4), sim_reset=reset)
     state = "fell" if fell else ("walking again" if at is not None else "not walking")
@@ -264,9 +267,10 @@ def inject(g: FaultGraph, node: str, before: float, away_wall_s: float, recover_
 
 def run_faults(out_dir: str | Path, zeta: float = 1.0, warm_s: float = 14.0, away_wall_s: float = 2.0,
                recover_s: float = 25.0, settle_s: float = 6.0, faults: tuple[str, ...] = FAULT_ORDER,
-               timeout: float = 900.0) -> dict:
+               timeout: float = 900.0, domain_id: int | None = None) -> dict:
     """Walk ``warm_s`` sim s, then each fault in turn (`inject`), ``settle_s`` sim s of walking between
-    them; write faults.json and faults.md to ``out_dir``; return the report."""
+    them; write faults.json and faults.md to ``out_dir``; return the report. ``domain_id``: the graph's
+    DDS domain (None: a quiet one)."""
     bad = [f for f in faults if f not in FAULT_ORDER]
     if bad:
         raise ValueError(f"unknown node(s) {bad}; faults are of {list(FAULT_ORDER)}")
@@ -274,23 +278,25 @@ def run_faults(out_dir: str | Path, zeta: float = 1.0, warm_s: float = 14.0, awa
     out.mkdir(parents=True, exist_ok=True)
     results: list[FaultResult] = []
     w0 = time.monotonic()
-    with FaultGraph(out, zeta=zeta) as g:
+    with FaultGraph(out, zeta=zeta, domain_id=domain_id) as g:
         g.start()
         g.say(f"graph on DDS domain {g.graph.domain_id}; walking to sim {warm_s:g} s")
         g.wait_sim(warm_s, timeout)
         before = g.odom.speed(4.0)
-        if before is None or g.odom.fell_at is not None:
+        if before is None or before < 0.02 or g.odom.fell_at is not None:
             raise RuntimeError(f"the robot is not walking before the faults (speed {before}, fell at "
                                f"{g.odom.fell_at})")
         g.say(f"walking at {before:.3f} m/s")
-        for i, node in enumerate(faults):
+        fallen = False
+        for node in faults:
+            if fallen and node != "sim_node":
+                g.say(f"the robot has fallen: no {node} fault (a sim restart stands it up again)")
+                continue
+            if results and not fallen:
+                g.wait_sim(g.odom.t + settle_s, timeout)
             res = inject(g, node, before, away_wall_s, recover_s, timeout)
             results.append(res)
-            if res.fell:
-                g.say("the robot fell: the remaining faults are not run")
-                break
-            if i + 1 < len(faults):
-                g.wait_sim(g.odom.t + settle_s, timeout)
+            fallen = res.fell
     report = {"zeta": zeta, "pacing": "realtime", "window_s": WINDOW_S, "walking_fraction": WALKING_FRACTION,
               "away_wall_s": away_wall_s, "wall_s": round(time.monotonic() - w0, 1),
               "faults": [asdict(r) for r in results]}
@@ -304,12 +310,13 @@ def markdown_table(report: dict) -> str:
     def f(v, fmt="{:.2f}"):
         return "-" if v is None else fmt.format(v)
 
-    lines = ["| node killed (SIGKILL) | at sim s | restarted after (wall s) | fell | walking again after "
-             "(sim s) | (wall s) | speed before / after (m/s) |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| node killed (SIGKILL) | at sim s | restarted after (wall s) | up at sim s | fell | walking "
+             "again after the kill (sim s) | (wall s) | after up (sim s) | speed before / after (m/s) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in report["faults"]:
         again = f(r["walking_again_s"]) + (" (new run's t)" if r["sim_reset"] else "")
         lines.append(f"| {r['node']} | {r['killed_at_s']:.2f} | {r['restarted_after_wall_s']:.1f} | "
-                     f"{'yes' if r['fell'] else 'no'} | {again} | {f(r['walking_again_wall_s'], '{:.1f}')} | "
+                     f"{r['up_at_s']:.2f} | {'yes' if r['fell'] else 'no'} | {again} | "
+                     f"{f(r['walking_again_wall_s'], '{:.1f}')} | {f(r['walking_after_up_s'])} | "
                      f"{r['speed_before_mps']:.3f} / {f(r['speed_after_mps'], '{:.3f}')} |")
     return "\n".join(lines) + "\n"
