@@ -127,6 +127,7 @@ class FaultGraph:
         self._node.create_subscription(Bool, "/sim/fallen", self._on_fallen, latched)
         self.graph.start("pid_node", **self.params("pid_node"))
         self.graph.start("cpg_node", **self.params("cpg_node"))
+        self.graph.wait_for_log("cpg_node", "CPG N=", 600.0)  # its own line (a loaded machine: minutes)
         self.wait(lambda: self._node.count_publishers("/joint_trajectory") > 0, 300.0, "cpg_node up")
         self.graph.start("sim_node", **self.params("sim_node"))
 

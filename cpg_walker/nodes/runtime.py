@@ -405,7 +405,12 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
             if on_exit is not None:
                 on_exit()
             node.destroy_node()
-        rclpy.try_shutdown()
+        from rclpy._rclpy_pybind11 import RCLError
+
+        try:
+            rclpy.try_shutdown()
+        except RCLError:  # rclpy's signal handler shut the context down in between (seen on SIGINT)
+            pass
     return status
 
 
