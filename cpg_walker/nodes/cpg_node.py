@@ -55,6 +55,7 @@ from cpg_walker.nodes.runtime import (
     Throttle,
     TickStats,
     bool_param,
+    clock_went_back,
     declare,
     declare_scheduling,
     exit_log,
@@ -274,6 +275,10 @@ class SensorBuffer:
 #: The start-up warm-up commands this fraction of the current zeta/alpha (0.9 of 0 is 0: then this value
 #: itself), so the modulation filters move too while the compiled kernels load.
 WARM_UP_COMMAND = 0.9
+#: A first /clock tick later than this (sim s) means the node joined a running sim (restarted, or started
+#: late): it re-enters the gait from the standing crouch (CPGGaitSource.reenter) instead of playing the
+#: recording's opening steps from t = 0.
+REJOIN_AFTER_S = 0.1
 #: Targets kept by stamp, to re-send a re-sent tick's targets identically.
 RECENT_KEEP = 4
 
@@ -344,10 +349,8 @@ class CPGNode(Node):
         self.timing = TickStats()
         self.stage = "learning"
         self.ctrl, self.origin, self.converged = self._controller(cpg_file, n_osc or None)
-        fb = FeedbackController(fb_cfg, pathways)
-        fb.weight = self.fade.weight
-        self.source = FeedbackGaitSource(self.ctrl, fb, zeta=zeta, alpha=alpha)
-        self.walk_from_s = self.source.handover + self.source.blend
+        self.learned = self.ctrl.to_dict()  # the loaded network, to start over from (a sim reset)
+        self._new_source(FeedbackController(fb_cfg, pathways), zeta, alpha)
         self._declare_cmd_vel(zeta)
         self._warm_up()
         self.stage = "converged"
@@ -374,7 +377,8 @@ class CPGNode(Node):
         self.waiting: deque[tuple[int, float]] = deque()  # lockstep: ticks waiting for their samples
         self.sensors_gave_up = False  # a lockstep wait timed out: no waiting until the samples catch up
         self.sensor_stats = {"dropped": 0, "wait_timeouts": 0, "clock_dropped": 0}
-        self.clock_jump_ns: int | None = None  # a tick far ahead of the last, awaiting confirmation
+        self.clock_jump_ns: int | None = None  # a tick far from the last, awaiting confirmation
+        self.clock_resets = 0
         self.fb_state = self.fade.state(self.fb_enabled)
         self.fb_age: float | None = None
         subs = [self.create_subscription(Clock, "/clock", self._on_clock, 100),
@@ -390,6 +394,48 @@ class CPGNode(Node):
         self._diagnostics(0)
         self.get_logger().info(f"CPG N={self.ctrl.net.N} from {self.origin}; recording's opening steps "
                                f"to {self.source.handover:.3f} s, CPG from {self.walk_from_s:.3f} s")
+
+    def _new_source(self, fb: FeedbackController, zeta: float, alpha: float) -> None:
+        """The target source: the recording's opening steps from t = 0, then the CPG."""
+        fb.weight = self.fade.weight
+        self.source = FeedbackGaitSource(self.ctrl, fb, zeta=zeta, alpha=alpha)
+        self.walk_from_s = self.source.handover + self.source.blend
+        self.rejoined_at_s: float | None = None
+
+    def _rejoin(self, t_ns: int) -> None:
+        """The first tick is at t_ns > REJOIN_AFTER_S: re-enter the gait there from the standing crouch,
+        alpha ramping up from 0 (CPGGaitSource.reenter); the parameters' zeta/alpha are commanded."""
+        zeta, alpha = self.get_parameter("zeta").value, self.get_parameter("alpha").value
+        self.source.reenter(t_ns / 1e9, zeta, alpha)
+        self.walk_from_s = self.source.handover + self.source.blend
+        self.rejoined_at_s = t_ns / 1e9
+        self.get_logger().info(
+            f"joined a running sim at {t_ns / 1e9:.3f} s: re-entering the gait from the standing crouch "
+            f"(CPG from phase 0, alpha ramping up from 0 to {alpha:g}, cross-fade over "
+            f"{self.source.blend:g} s; walking from {self.walk_from_s:.3f} s)")
+
+    def _clock_reset(self, t_ns: int) -> None:
+        """/clock went back by more than CLOCK_RESET_S (a restarted sim): start over from the loaded
+        network, as a fresh node would (its first tick at t_ns)."""
+        old = self.last_tick_ns
+        self.get_logger().warn(f"/clock went back from {old / 1e9:.3f} s to {t_ns / 1e9:.3f} s (sim "
+                               "restarted): starting the CPG over")
+        self.ctrl = HumanoidCPG.from_dict(self.learned)
+        fb = self.source.fb
+        self.fade.u = self.fade.weight = 0.0
+        self._new_source(FeedbackController(fb.cfg, fb.pathways), self.get_parameter("zeta").value,
+                         self.get_parameter("alpha").value)
+        self.last_tick_ns = self.sent_ns = None
+        self.recent.clear()
+        self.next_monitor_ns = self.next_horizon_ns = 0
+        self.waiting.clear()
+        self.imu = SensorBuffer()
+        self.loads = [SensorBuffer() for _ in FOOT_LOAD_FRAMES]
+        self.buffers = [self.imu, *self.loads]
+        self.sensors_gave_up = False
+        self.cmd = CmdVelFollower(self.cmd_map, self.cmd.limits, self.get_parameter("zeta").value)
+        self.cmd_out, self.cmd_override = None, False
+        self.clock_resets += 1
 
     def _declare_cmd_vel(self, zeta: float) -> None:
         """The ``cmd_vel.*`` parameters (config/cpg.yaml) and the follower (walker/cmd_vel.py)."""
@@ -674,6 +720,11 @@ class CPGNode(Node):
         t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
         if self._clock_jump(t_ns):
             return
+        if clock_went_back(self.last_tick_ns, t_ns):
+            self._clock_reset(t_ns)
+        if self.last_tick_ns is None and not self.waiting and t_ns > REJOIN_AFTER_S * 1e9 \
+                and self.rejoined_at_s is None:
+            self._rejoin(t_ns)
         if self.last_tick_ns is not None and t_ns <= self.last_tick_ns:
             self._tick(t_ns)  # a re-sent (or old) tick: its targets again, from the cache
             return
@@ -683,19 +734,25 @@ class CPGNode(Node):
         self._run_waiting()
 
     def _clock_jump(self, t_ns: int) -> bool:
-        """Whether to drop the tick t_ns as a stray: more than CLOCK_JUMP_NS past the last tick, and not
-        (yet) confirmed by a tick continuing from it within CLOCK_JUMP_NS. One /clock sample far in the
-        future (a corrupt stamp, a second publisher) would otherwise end the walk: every real tick after
-        it would look old. A real jump (the node stalled longer) is taken one tick later."""
+        """Whether to drop the tick t_ns as a stray: more than CLOCK_JUMP_NS past the last tick or more
+        than CLOCK_RESET_S before it, and not (yet) confirmed by a later tick continuing from it within
+        CLOCK_JUMP_NS (going back: or the same tick again, as a restarted lockstep sim re-sends its first).
+        One /clock sample far in the future (a corrupt stamp, a second publisher) would otherwise end the
+        walk, every real tick after it looking old; one from the past would start the CPG over. A real
+        jump (the node stalled, the sim restarted) is taken one tick later."""
         last, seen = self.last_tick_ns, self.clock_jump_ns
-        if last is None or t_ns - last <= CLOCK_JUMP_NS or (seen is not None
-                                                            and 0 < t_ns - seen <= CLOCK_JUMP_NS):
+        ahead = last is not None and t_ns - last > CLOCK_JUMP_NS
+        if not ahead and not clock_went_back(last, t_ns):
+            self.clock_jump_ns = None
+            return False
+        if seen is not None and (0 < t_ns - seen <= CLOCK_JUMP_NS or (not ahead and t_ns == seen)):
             self.clock_jump_ns = None
             return False
         self.clock_jump_ns = t_ns
         self.sensor_stats["clock_dropped"] += 1
-        self.throttle.warn(self, "/clock jump", f"dropped /clock {t_ns / 1e9:.9g} s: more than "
-                           f"{CLOCK_JUMP_NS / 1e9:g} s past the last tick {last / 1e9:.9g} s, unconfirmed")
+        self.throttle.warn(self, "/clock jump", f"dropped /clock {t_ns / 1e9:.9g} s: "
+                           f"{'far past' if ahead else 'back from'} the last tick {last / 1e9:.9g} s, "
+                           "unconfirmed")
         return True
 
     def _run_waiting(self) -> None:
@@ -913,7 +970,9 @@ class CPGNode(Node):
         exit_log(self, "stats " + json.dumps({**self.activity.summary(), "overruns": timing["overruns"],
                                               "tick": timing, "gc": gc_summary(self),
                                               "horizon_work": latency_summary(self.horizon_work),
-                                              "feedback": feedback, "cmd_vel": self.cmd_stats}))
+                                              "feedback": feedback, "cmd_vel": self.cmd_stats,
+                                              "rejoined_at_s": self.rejoined_at_s,
+                                              "clock_resets": self.clock_resets}))
 
 
 

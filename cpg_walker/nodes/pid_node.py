@@ -25,6 +25,7 @@ from cpg_walker.nodes.runtime import (
     HotPath,
     Throttle,
     bool_param,
+    clock_went_back,
     declare,
     declare_scheduling,
     exit_log,
@@ -104,6 +105,8 @@ class PidNode(Node):
                     "longest_gap_s": 0.0}
         self.gap_warned = False
         self.tripped = False
+        self.clock_resets = 0
+        self.join: tuple[int, np.ndarray] | None = None  # (first state ns, posture): joined a running sim
         self.latest_state_ns = 0
         self.last_state_ns: int | None = None
         self.answered_ns: int | None = None
@@ -226,6 +229,8 @@ class PidNode(Node):
         if t == self.answered_ns:  # a re-sent state: answer again, identically
             self.pub.publish(self.b_tau.msg)
             return
+        if clock_went_back(self.last_state_ns, t):
+            self._clock_reset(t)
         if self.last_state_ns is not None and t < self.last_state_ns:
             return  # older than what was answered: stale duplicate
         self.latest_state_ns = max(self.latest_state_ns, t)
@@ -234,6 +239,36 @@ class PidNode(Node):
                 self.pending = (t, q, v, time.monotonic())
             return
         self._answer(t, q, v)
+
+    def _join_blend(self, t_ns: int, q_ref: np.ndarray, v_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A node started mid-run: from the posture measured at its first state to the reference, C1
+        over resume_blend (the robot is wherever the servos' own hold left it, not at the targets)."""
+        t0, q0 = self.join
+        T = self.bridge.resume_blend_s
+        u = 1.0 if T <= 0 else (t_ns - t0) / 1e9 / T
+        if u >= 1.0:
+            self.join = None
+            return q_ref, v_ref
+        w, dw = u * u * (3.0 - 2.0 * u), 6.0 * u * (1.0 - u) / T
+        return q0 + w * (q_ref - q0), w * v_ref + dw * (q_ref - q0)
+
+    def _clock_reset(self, t_ns: int) -> None:
+        """A state stamped more than CLOCK_RESET_S before the last answered one: the sim has restarted.
+        Start over as a fresh node: targets and horizon forgotten, the standing crouch, integral 0."""
+        self.get_logger().warn(f"/joint_states went back from {self.last_state_ns / 1e9:.3f} s to "
+                               f"{t_ns / 1e9:.3f} s (sim restarted): starting over")
+        self.targets_by_stamp.clear()
+        self.last_target_ns = self.live_ns = self.last_state_ns = self.answered_ns = None
+        self.latest_state_ns = 0
+        self.pending = None
+        self.tripped = self.gap_warned = False
+        self.q_target = np.array(default_standing_posture(), dtype=float)
+        self.v_target = np.zeros(len(JOINT_NAMES))
+        b = self.bridge
+        self.bridge = GapBridge(default_standing_posture(), b.safe_blend_s, b.resume_blend_s)
+        self.law.integral[:] = 0.0
+        self.join = None
+        self.clock_resets += 1
 
     def _must_wait(self, t_ns: int) -> bool:
         if not self.wait_targets or self.tripped:
@@ -271,6 +306,12 @@ class PidNode(Node):
         q_ref, v_ref = self.q_target, self.v_target
         if not self.lockstep and self.bridge.active:
             q_ref, v_ref = self._bridge(t_ns)
+        if self.last_state_ns is None and t_ns > 0:  # joined a running sim (restarted): blend in
+            self.join = (t_ns, q.copy())
+            self.get_logger().info(f"joined a running sim at {t_ns / 1e9:.3f} s: blending from the measured "
+                                   f"posture to the targets over {self.bridge.resume_blend_s:g} s")
+        if self.join is not None:
+            q_ref, v_ref = self._join_blend(t_ns, q_ref, v_ref)
         elif (not self.tripped and self.last_target_ns is not None
                 and t_ns - self.last_target_ns > self.timeout_ns):
             self._trip(f"last target {(t_ns - self.last_target_ns) / 1e9:.3f} sim s old")
@@ -316,7 +357,7 @@ class PidNode(Node):
 
     def on_exit(self) -> None:
         exit_log(self, "stats " + json.dumps({**self.activity.summary(), "gaps": self.gap,
-                                              "gc": gc_summary(self)}))
+                                              "clock_resets": self.clock_resets, "gc": gc_summary(self)}))
 
 
 

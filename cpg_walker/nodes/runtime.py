@@ -17,6 +17,15 @@ if TYPE_CHECKING:  # rclpy itself is imported where it is used: the CLI imports 
 
 #: sim_node's pacings: wall-clock schedule, as fast as possible, or one period per controller answer.
 PACINGS = ("realtime", "fast", "lockstep")
+#: Sim s a /clock or state stamp may lie before the newest one seen before a node takes it for a restarted
+#: (reset) sim and starts its own state over (docs/ROS_INTERFACE.md, "Faults"); smaller steps back are
+#: stale or re-sent messages.
+CLOCK_RESET_S = 1.0
+
+
+def clock_went_back(newest_ns: int | None, t_ns: int) -> bool:
+    """True when ``t_ns`` lies more than CLOCK_RESET_S before ``newest_ns``: the sim has restarted."""
+    return newest_ns is not None and newest_ns - t_ns > CLOCK_RESET_S * 1e9
 #: Each node executable's ROS node name; its parameters are config/<node name>.yaml (``params_file``).
 NODE_NAMES = {"sim_node": "sim", "pid_node": "pid", "target_player_node": "target_player", "cpg_node": "cpg",
               "recorder_node": "recorder", "foxglove_node": "foxglove"}
@@ -396,7 +405,12 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
             if on_exit is not None:
                 on_exit()
             node.destroy_node()
-        rclpy.try_shutdown()
+        from rclpy._rclpy_pybind11 import RCLError
+
+        try:
+            rclpy.try_shutdown()
+        except RCLError:  # rclpy's signal handler shut the context down in between (seen on SIGINT)
+            pass
     return status
 
 

@@ -71,6 +71,29 @@ try:  # tf2_msgs is not on PyPI: a pip-only install has no live /tf (recordings 
 except ImportError:
     TFMessage = None
 
+class ServoHold:
+    """The servo drives' own watchdog (a real drive holds its position when its controller goes quiet):
+    after ``after_s`` sim s without a new torque, the joints hold the posture measured at that moment
+    through the PID law with config/pid.yaml's gains; off again with the next fresh torque. (Blending to
+    the standing crouch from mid-stride instead fell within 1 s: measured, docs "Faults".)"""
+
+    def __init__(self, after_s: float) -> None:
+        from cpg_walker.robot.pid import PidLaw, load_pid_config
+
+        self.after_ns = round(after_s * 1e9)
+        self.law = PidLaw.from_config(config=load_pid_config())
+        self.active = False
+        self.entries = 0
+        self.q0: np.ndarray | None = None
+
+    def torque(self, q: np.ndarray, qd: np.ndarray, dt: float) -> np.ndarray:
+        if not self.active:
+            self.active, self.q0 = True, np.array(q, dtype=float)
+            self.law.integral[:] = 0.0
+            self.entries += 1
+        return self.law.step(self.q0, np.zeros_like(self.q0), q, qd, dt)
+
+
 INTERFACE = """\
 publishes: /clock (rosgraph_msgs/Clock), /joint_states (sensor_msgs/JointState: position, velocity,
   effort of all 25 joints), /imu (sensor_msgs/Imu, frame 'imu'), /foot_load/left and /foot_load/right
@@ -82,7 +105,7 @@ subscribes: /joint_torques (sensor_msgs/JointState: name + effort in N*m, stamp 
 services: ~/reset, ~/push (std_srvs/Trigger)
 parameters: pacing (realtime|fast|lockstep), control_period (s), real_time_factor, duration (sim s,
   0 = run until stopped), publish_description, stop_on_fall, wait_for_controller, wait_for_subscriber,
-  lockstep_resend and late_torque_wait (wall s), max_torque_age (sim s), odom_period,
+  lockstep_resend and late_torque_wait (wall s), max_torque_age and servo_hold_after (sim s), odom_period,
   diagnostics_period (sim s), imu_variance_floor, push.force [N,N,N], push.body, push.duration (s),
   record_path, record_period (s), realtime_priority, nice, cpu_affinity (OS scheduling, realtime pacing)"""
 
@@ -138,6 +161,10 @@ class SimNode(Node):
         self.max_age_ns = round(p("max_torque_age", float_param(
             "realtime: sim s a torque may be old and still drive a period without waiting", 0.0, 1.0,
             read_only=True)) * 1e9)
+        self.servo = ServoHold(float(p("servo_hold_after", float_param(
+            "sim s a torque may be old before the servos hold their posture by themselves (a lost "
+            "controller); 0 = never", 0.0, 10.0,
+            read_only=True))))
         odom = p("odom_period", float_param("sim s between ground-truth odometry messages", 0.0, 10.0,
                                             read_only=True))
         diag = p("diagnostics_period", float_param("sim s between /diagnostics messages", 0.01, 100.0,
@@ -270,6 +297,22 @@ class SimNode(Node):
         tau = np.zeros(len(JOINT_NAMES))
         tau[cmd.index] = cmd.effort
         self.tau, self.tau_stamp = tau, t
+
+    def _torque(self, t_ns: int) -> np.ndarray:
+        """The torque for the period from t_ns: the controller's newest; once it is older than
+        servo_hold_after (the controller is gone), the servos' own hold (ServoHold)."""
+        if self.tau_stamp < 0 or not self.servo.after_ns or t_ns - self.tau_stamp <= self.servo.after_ns:
+            if self.servo.active:
+                self.servo.active = False
+                self.get_logger().info(f"torques resumed at sim {t_ns / 1e9:.3f} s: servo hold off")
+            return self.tau
+        sim = self.sim
+        q, qd = sim.data.qpos[sim._qadr], sim.data.qvel[sim._dadr]
+        if not self.servo.active:
+            self.get_logger().warn(
+                f"no torque newer than {self.tau_stamp / 1e9:.3f} s at sim {t_ns / 1e9:.3f} s: the servos "
+                "hold their posture")
+        return self.servo.torque(q, qd, self.period_ns / 1e9)
 
     def _on_reset(self, request, response):
         self.sim.reset()
@@ -491,7 +534,7 @@ class SimNode(Node):
                 self.slow_spin(time.perf_counter())
             self.torque_age.append(t_ns - self.tau_stamp)
             self.pusher.update()
-            self.sim.step(self.tau, self.steps_per_period)
+            self.sim.step(self._torque(t_ns), self.steps_per_period)
             self.k += 1
             t_next = self.k * self.period_ns
             if self.k % self.record_every == 0:
@@ -528,6 +571,7 @@ class SimNode(Node):
             "late_recent": self.late_recent, "late_waited": self.late_waited, "late_held": self.late_held,
             "late_wait_wall_s": round(self.late_wait_wall, 3),
             "late_wait_max_s": round(self.late_wait_max, 4),
+            "servo_holds": self.servo.entries,
             "resends": self.resends, "cpu_s": round(time.process_time() - self.cpu_start, 3),
             "latency": latency_summary(self.latencies[1:]),
             "torque_age_s": {"mean": round(float(age.mean()), 6), "max": round(float(age.max()), 6)},

@@ -91,6 +91,23 @@ class CPGGaitSource:
         self._cache = None
         self.feedback_g: np.ndarray | None = None  # eqs 16–17 g_k applied while stepping (feedback.py)
 
+    def reenter(self, t: float, zeta: float, alpha: float) -> None:
+        """Re-enter the gait at sim time ``t`` > 0 (a cpg node (re)started while the sim runs, or after a
+        sim reset past the hand-over): the ``"standing"`` transition started at ``t`` instead of 0 — the
+        CPG from phase 0 with α ramping up from 0 (its command filter) and the offsets blended from the
+        standing crouch (the posture pid_node's watchdog holds when targets stop) over ``blend``; no
+        recording, pending commands dropped. ``zeta``, ``alpha``: the commands to walk at."""
+        if not (t >= 0 and math.isfinite(t)):
+            raise ValueError(f"re-entry time must be a finite sim time >= 0, got {t}")
+        self.transition = "standing"
+        self.handover = float(t)
+        self.schedule = []
+        self.ctrl.reset_phase(0.0)
+        self.ctrl.set_modulation_state(zeta, 0.0)
+        self.ctrl.set_alpha(alpha)
+        self._t_net = self.handover
+        self.feedback_g = None
+
     def _advance(self, t: float) -> None:
         while self.schedule and self.schedule[0][0] <= t + 1e-12:
             _, z, a = self.schedule.pop(0)
@@ -211,6 +228,12 @@ class FeedbackGaitSource(CPGGaitSource):
         if t >= self._next_trace - 1e-9:  # one sample per trace_dt of sim time, whatever the tick rate
             self.g_trace.append((t, *fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
             self._next_trace = t + self.trace_dt
+
+    def reenter(self, t: float, zeta: float, alpha: float) -> None:
+        """`CPGGaitSource.reenter`; the feedback pathways close once its cross-fade ends."""
+        super().reenter(t, zeta, alpha)
+        self.active_from = self.handover + self.blend
+        self._yaw_u = 0.0
 
     def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         q, qd = super().targets(t)

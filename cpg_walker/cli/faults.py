@@ -1,0 +1,34 @@
+"""`cpg-walker faults --out DIR`: kill (SIGKILL) and restart each node of the walking ROS graph in turn
+(sim_node in realtime pacing, pid_node, cpg_node at zeta 1); per fault: fell or not, time until walking
+again; DIR/faults.json and DIR/faults.md (experiments/faults.py)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from cpg_walker.experiments.faults import FAULT_ORDER
+
+    p = sub.add_parser("faults", help="kill and restart each graph node while walking; faults.json + table")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--zeta", type=float, default=1.0, help="frequency ratio to walk at (default 1)")
+    p.add_argument("--warm", type=float, default=14.0, metavar="S",
+                   help="sim s of walking before the first fault (default 14)")
+    p.add_argument("--away", type=float, default=2.0, metavar="S",
+                   help="wall s between killing a node and starting it again (default 2)")
+    p.add_argument("--nodes", default=",".join(FAULT_ORDER), metavar="A,B",
+                   help=f"nodes to kill, in order (default {','.join(FAULT_ORDER)})")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    import json
+
+    from cpg_walker.experiments.faults import markdown_table, run_faults
+
+    nodes = tuple(n.strip() for n in args.nodes.split(",") if n.strip())
+    report = run_faults(args.out, zeta=args.zeta, warm_s=args.warm, away_wall_s=args.away, faults=nodes)
+    print(json.dumps(report["faults"]))
+    print(markdown_table(report), end="")
+    return 0

@@ -1,0 +1,323 @@
+"""Node faults on the real graph (`cpg-walker faults --out DIR`): sim_node (realtime pacing) + pid_node +
+cpg_node as processes, walking at ζ = 1; each node in turn is killed (SIGKILL, its whole process group)
+mid-walk and started again, and the robot's response is measured from /odom/ground_truth and /sim/fallen:
+whether it fell, and the time until it walks again (its forward speed over the last WINDOW_S sim s back
+above WALKING_FRACTION of the speed before the first fault). Writes DIR/faults.json and DIR/faults.md.
+
+What each node does about the others' faults (docs/ROS_INTERFACE.md, "Faults"): pid_node follows the
+/joint_trajectory horizon and then holds the standing crouch when /joint_targets stop; a cpg_node that
+joins a running sim re-enters the gait from that crouch (CPGGaitSource.reenter); the sim waits for a late
+torque (late_torque_wait) and then goes on with the held one; a restarted sim starts at t = 0, which
+pid_node and cpg_node take for a reset (runtime.CLOCK_RESET_S) and start over.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+#: Sim s of odometry the walking speed is measured over (about two strides).
+WINDOW_S = 2.0
+#: "Walking again": the speed over the last WINDOW_S at least this fraction of the speed before the faults.
+WALKING_FRACTION = 0.5
+#: The order the nodes are killed and restarted in.
+FAULT_ORDER = ("cpg_node", "pid_node", "sim_node")
+
+
+#: The log line of a restarted node that says it is up (cpg_node: re-entering the gait).
+UP_LOG = {"cpg_node": "re-entering the gait", "pid_node": "PID on 25 joints", "sim_node": "pacing="}
+
+
+@dataclass
+class FaultResult:
+    node: str
+    killed_at_s: float  # sim time of the kill
+    restarted_after_wall_s: float  # wall s from the kill to the restart
+    fell: bool
+    fall_time_s: float | None  # sim time (of the sim run then going; after a sim fault, the new one's)
+    walking_again_s: float | None  # sim s from the kill until walking again (sim fault: the new run's t)
+    walking_again_wall_s: float | None  # wall s from the kill until walking again
+    up_at_s: float  # sim time the new node was up (its log line UP_LOG; sim fault: 0, the new run)
+    walking_after_up_s: float | None  # sim s from then until walking again (incl. the WINDOW_S)
+    speed_before_mps: float
+    speed_after_mps: float | None  # over the WINDOW_S at which it counted as walking again
+    sim_reset: bool = False  # the sim restarted at t = 0 (the others saw time go back)
+
+
+@dataclass
+class Odometry:
+    """/odom/ground_truth (t, x, y) of the current sim run, and the latched /sim/fallen."""
+
+    samples: list[tuple[float, float, float]] = field(default_factory=list)
+    runs: int = 0  # sim runs seen (a restarted sim's time goes back)
+    fell_at: float | None = None
+
+    def add(self, t: float, x: float, y: float) -> None:
+        if self.samples and t < self.samples[-1][0] - 0.5:
+            self.samples, self.fell_at = [], None
+            self.runs += 1
+        self.samples.append((t, x, y))
+
+    @property
+    def t(self) -> float:
+        return self.samples[-1][0] if self.samples else 0.0
+
+    def speed(self, window_s: float = WINDOW_S, until: float | None = None) -> float | None:
+        """Planar speed (m/s) over the window_s sim s ending at ``until`` (default: the newest sample)."""
+        end = self.t if until is None else until
+        pts = [s for s in self.samples if end - window_s - 1e-9 <= s[0] <= end + 1e-9]
+        if len(pts) < 2 or pts[-1][0] - pts[0][0] < 0.9 * window_s:
+            return None
+        (t0, x0, y0), (t1, x1, y1) = pts[0], pts[-1]
+        return math.hypot(x1 - x0, y1 - y0) / (t1 - t0)
+
+
+class FaultGraph:
+    """The walking graph and a monitor node on its domain; `kill` / `restart` a node; wait on sim time.
+    A context manager that stops every process it started."""
+
+    def __init__(self, out_dir: str | Path, zeta: float = 1.0, domain_id: int | None = None,
+                 say=None):
+        from cpg_walker.nodes.graph import Graph
+
+        self.out = Path(out_dir)
+        self.graph = Graph(self.out / "logs", domain_id=domain_id)
+        self.zeta = float(zeta)
+        self.odom = Odometry()
+        self.say = say or (lambda text: print(f"faults: {text}", file=sys.stderr, flush=True))
+        self.restarts: dict[str, int] = {}
+        self._ctx = self._node = self._executor = None
+
+    # -------------------------------------------------------------- processes
+    def params(self, node: str) -> dict:
+        if node == "sim_node":
+            return {"pacing": "realtime", "duration": 0.0, "stop_on_fall": False}
+        if node == "pid_node":
+            return {"wait_for_targets": True}
+        return {"zeta": self.zeta}
+
+    def start(self) -> None:
+        """pid_node and cpg_node, then the sim (realtime) once cpg_node is up, as users start the graph."""
+        import rclpy
+        from nav_msgs.msg import Odometry as OdomMsg
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from rclpy.signals import SignalHandlerOptions
+        from std_msgs.msg import Bool
+
+        keys = ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOCALHOST_ONLY")
+        self._saved_env = {k: os.environ.get(k) for k in keys}
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # as the graph's nodes (Graph.env)
+        os.environ.pop("ROS_LOCALHOST_ONLY", None)
+        self._ctx = rclpy.Context()
+        rclpy.init(context=self._ctx, domain_id=self.graph.domain_id,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        self._node = rclpy.create_node("faults_monitor", context=self._ctx, start_parameter_services=False)
+        self._executor = SingleThreadedExecutor(context=self._ctx)
+        self._executor.add_node(self._node)
+        self._node.create_subscription(OdomMsg, "/odom/ground_truth", self._on_odom, 100)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._node.create_subscription(Bool, "/sim/fallen", self._on_fallen, latched)
+        self.graph.start("pid_node", **self.params("pid_node"))
+        self.graph.start("cpg_node", **self.params("cpg_node"))
+        self.graph.wait_for_log("cpg_node", "CPG N=", 600.0)  # its own line (a loaded machine: minutes)
+        self.wait(lambda: self._node.count_publishers("/joint_trajectory") > 0, 300.0, "cpg_node up")
+        self.graph.start("sim_node", **self.params("sim_node"))
+
+    def _on_odom(self, msg) -> None:
+        s = msg.header.stamp
+        p = msg.pose.pose.position
+        self.odom.add(s.sec + s.nanosec * 1e-9, p.x, p.y)
+
+    def _on_fallen(self, msg) -> None:
+        if msg.data and self.odom.fell_at is None:
+            self.odom.fell_at = self.odom.t
+
+    def kill(self, node: str) -> None:
+        """SIGKILL the node's process group (no clean-up, as a crash)."""
+        proc = self.graph.procs[node]
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.popen.wait(timeout=30)
+
+    def restart(self, node: str) -> None:
+        """Start ``node`` again with the same parameters (its previous log kept as <node>.<n>.log)."""
+        n = self.restarts.get(node, 0) + 1
+        self.restarts[node] = n
+        log = self.graph.procs[node].log_path
+        if log.exists():
+            log.rename(log.with_name(f"{node}.{n}.log"))
+        self.graph.start(node, **self.params(node))
+
+    # -------------------------------------------------------------- waiting
+    def spin(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self._executor.spin_once(timeout_sec=0.01)
+
+    def wait(self, until, timeout: float, what: str) -> None:
+        """Spin until ``until()``; TimeoutError naming ``what`` (and the sim's log tail) after ``timeout``
+        wall s (a hang guard, not a speed claim)."""
+        end = time.monotonic() + timeout
+        while not until():
+            if time.monotonic() > end:
+                sim = self.graph.procs.get("sim_node")
+                tail = sim.log()[-1500:] if sim else ""
+                raise TimeoutError(f"{what}: not within {timeout} wall s (sim at {self.odom.t:.2f} s); "
+                                   f"sim log tail:\n{tail}")
+            self._executor.spin_once(timeout_sec=0.01)
+
+    def wait_sim(self, t: float, timeout: float = 600.0) -> None:
+        run = self.odom.runs
+        self.wait(lambda: self.odom.runs == run and self.odom.t >= t, timeout, f"sim time {t} s")
+
+    def wait_walking(self, speed_mps: float, after_s: float, limit_s: float, timeout: float,
+                     run: int | None = None) -> float | None:
+        """Sim time (of sim run ``run``, default the current) at which the speed over the last WINDOW_S,
+        measured from ``after_s`` on, first reaches ``speed_mps``; None if not by ``limit_s`` sim s or
+        after a fall."""
+        run = self.odom.runs if run is None else run
+        found: list[float] = []
+
+        def done() -> bool:
+            o = self.odom
+            if o.runs != run:
+                return False
+            if o.fell_at is not None or o.t >= limit_s:
+                return True
+            if o.t >= after_s + WINDOW_S:
+                v = o.speed()
+                if v is not None and v >= speed_mps:
+                    found.append(o.t)
+                    return True
+            return False
+
+        self.wait(done, timeout, f"walking again (or {limit_s} sim s)")
+        return found[0] if found else None
+
+    def close(self) -> None:
+        try:
+            self.graph.stop_all()
+        finally:
+            if self._node is not None:
+                self._node.destroy_node()
+            if self._ctx is not None:
+                import rclpy
+
+                rclpy.try_shutdown(context=self._ctx)
+            for k, v in getattr(self, "_saved_env", {}).items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
+
+    def __enter__(self) -> FaultGraph:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def inject(g: FaultGraph, node: str, before: float, away_wall_s: float, recover_s: float,
+           timeout: float) -> FaultResult:
+    """Kill ``node`` now, start it again ``away_wall_s`` wall s later, and wait until the robot walks again
+    (up to ``recover_s`` sim s after the new node is up, or of the new run for the sim)."""
+    t_kill, w_kill = g.odom.t, time.monotonic()
+    runs = g.odom.runs
+    g.say(f"killing {node} at sim {t_kill:.2f} s")
+    g.kill(node)
+    g.spin(away_wall_s)
+    g.restart(node)
+    restarted = time.monotonic() - w_kill
+    g.say(f"restarted {node} after {restarted:.1f} wall s (sim at {g.odom.t:.2f} s)")
+    reset = node == "sim_node"
+    if reset:  # the new sim's time starts at 0: its run is the next one
+        g.wait(lambda: g.odom.runs > runs, timeout, "the restarted sim's odometry")
+        start, origin, limit = 0.0, 0.0, recover_s
+    else:  # walking is measured from the moment the new node is up (not on the motion before)
+        g.graph.wait_for_log(node, UP_LOG[node], timeout)
+        g.spin(0.2)  # the odometry that came meanwhile
+        start, origin = g.odom.t, t_kill
+        limit = start + recover_s
+    g.say(f"{node} up at sim {g.odom.t:.2f} s")
+    at = g.wait_walking(WALKING_FRACTION * before, start, limit, timeout, run=runs + int(reset))
+    wall = time.monotonic() - w_kill
+    fell = g.odom.fell_at is not None
+    res = FaultResult(
+        node=node, killed_at_s=round(t_kill, 3), restarted_after_wall_s=round(restarted, 2), fell=fell,
+        fall_time_s=None if not fell else round(g.odom.fell_at, 3),
+        walking_again_s=None if at is None else round(at - origin, 3),
+        walking_again_wall_s=None if at is None else round(wall, 2),
+        up_at_s=round(start, 3), walking_after_up_s=None if at is None else round(at - start, 3),
+        speed_before_mps=round(before, 4),
+        speed_after_mps=None if at is None else round(g.odom.speed(), 4), sim_reset=reset)
+    state = "fell" if fell else ("walking again" if at is not None else "not walking")
+    g.say(f"{node}: {state}" + (f" {res.walking_again_s:.2f} sim s after the kill ({res.walking_again_wall_s}"
+                                " wall s)" if at is not None else ""))
+    return res
+
+
+def run_faults(out_dir: str | Path, zeta: float = 1.0, warm_s: float = 14.0, away_wall_s: float = 2.0,
+               recover_s: float = 25.0, settle_s: float = 6.0, faults: tuple[str, ...] = FAULT_ORDER,
+               timeout: float = 900.0, domain_id: int | None = None) -> dict:
+    """Walk ``warm_s`` sim s, then each fault in turn (`inject`), ``settle_s`` sim s of walking between
+    them; write faults.json and faults.md to ``out_dir``; return the report. ``domain_id``: the graph's
+    DDS domain (None: a quiet one)."""
+    bad = [f for f in faults if f not in FAULT_ORDER]
+    if bad:
+        raise ValueError(f"unknown node(s) {bad}; faults are of {list(FAULT_ORDER)}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    results: list[FaultResult] = []
+    w0 = time.monotonic()
+    with FaultGraph(out, zeta=zeta, domain_id=domain_id) as g:
+        g.start()
+        g.say(f"graph on DDS domain {g.graph.domain_id}; walking to sim {warm_s:g} s")
+        g.wait_sim(warm_s, timeout)
+        before = g.odom.speed(4.0)
+        if before is None or before < 0.02 or g.odom.fell_at is not None:
+            raise RuntimeError(f"the robot is not walking before the faults (speed {before}, fell at "
+                               f"{g.odom.fell_at})")
+        g.say(f"walking at {before:.3f} m/s")
+        fallen = False
+        for node in faults:
+            if fallen and node != "sim_node":
+                g.say(f"the robot has fallen: no {node} fault (a sim restart stands it up again)")
+                continue
+            if results and not fallen:
+                g.wait_sim(g.odom.t + settle_s, timeout)
+            res = inject(g, node, before, away_wall_s, recover_s, timeout)
+            results.append(res)
+            fallen = res.fell
+    report = {"zeta": zeta, "pacing": "realtime", "window_s": WINDOW_S, "walking_fraction": WALKING_FRACTION,
+              "away_wall_s": away_wall_s, "wall_s": round(time.monotonic() - w0, 1),
+              "faults": [asdict(r) for r in results]}
+    (out / "faults.json").write_text(json.dumps(report, indent=2) + "\n")
+    (out / "faults.md").write_text(markdown_table(report))
+    return report
+
+
+def markdown_table(report: dict) -> str:
+    """The per-fault table (README / ROS_INTERFACE "Faults")."""
+    def f(v, fmt="{:.2f}"):
+        return "-" if v is None else fmt.format(v)
+
+    lines = ["| node killed (SIGKILL) | at sim s | restarted after (wall s) | up at sim s | fell | walking "
+             "again after the kill (sim s) | (wall s) | after up (sim s) | speed before / after (m/s) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in report["faults"]:
+        again = f(r["walking_again_s"]) + (" (new run's t)" if r["sim_reset"] else "")
+        lines.append(f"| {r['node']} | {r['killed_at_s']:.2f} | {r['restarted_after_wall_s']:.1f} | "
+                     f"{r['up_at_s']:.2f} | {'yes' if r['fell'] else 'no'} | {again} | "
+                     f"{f(r['walking_again_wall_s'], '{:.1f}')} | {f(r['walking_after_up_s'])} | "
+                     f"{r['speed_before_mps']:.3f} / {f(r['speed_after_mps'], '{:.3f}')} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,96 @@
+"""Node faults on the real graph (issue 14, part 1): sim_node (realtime pacing) + pid_node + cpg_node as
+processes walking at zeta 1 (experiments/faults.py's FaultGraph). The cpg node is killed (SIGKILL)
+mid-walk: pid_node holds a safe posture (the horizon, then the standing crouch) and the robot stays up;
+started again, cpg_node re-enters the gait from that crouch and the robot walks again without a fall;
+then the pid node is killed (the sim's servos hold, no fall) and restarted: tracking resumes. A restarted sim
+(time back to 0) is survived by pid_node and cpg_node: they start over and the robot walks again.
+Judged in sim time from /odom/ground_truth and /sim/fallen; wall-clock deadlines only end a hang."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from ros_helpers import START_S, sim_deadline
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+WARM_S = 9.0  # sim s of walking before the first fault (the CPG drives alone from 6.6 s)
+HOLD_S = 3.0  # sim s the robot must stay up on pid_node's watchdog with the cpg node dead
+RECOVER_S = 20.0  # sim s after a fault within which the robot must walk again
+
+
+def _faults(tmp_path, ros_domain):
+    from cpg_walker.experiments.faults import FaultGraph
+
+    return FaultGraph(tmp_path, domain_id=ros_domain, say=lambda text: None)
+
+
+def test_cpg_and_pid_killed_and_restarted(tmp_path, ros_domain):
+    """cpg killed at 9 s: the robot stays up >= 3 sim s on the pid watchdog (horizon, then the crouch);
+    cpg restarted: it rejoins (log) and the robot walks again without a fall; pid killed: the sim's
+    clock goes on, its servos hold, no fall for 3 sim s; pid restarted: it joins and its torques drive
+    the sim again (tracking resumes). (That the robot then falls, frozen mid-stride while the CPG went
+    on: measured, docs "Faults", not asserted.)"""
+    from cpg_walker.experiments.faults import WALKING_FRACTION
+
+    with _faults(tmp_path, ros_domain) as g:
+        g.start()
+        g.wait_sim(WARM_S, sim_deadline(WARM_S))
+        before = g.odom.speed(2.0)
+        assert before is not None and before > 0.03 and g.odom.fell_at is None, (before, g.odom.fell_at)
+
+        t_kill = g.odom.t
+        g.kill("cpg_node")
+        g.wait_sim(t_kill + HOLD_S, sim_deadline(HOLD_S))
+        assert g.odom.fell_at is None, f"fell at {g.odom.fell_at} s with the cpg node dead (since {t_kill})"
+        pid_log = g.graph.procs["pid_node"].log()
+        assert "blending to the standing posture" in pid_log, pid_log[-2000:]  # the watchdog's safe posture
+        still = g.odom.speed(1.0)
+        assert still is not None and still < WALKING_FRACTION * before, (still, before)  # it stopped
+
+        g.restart("cpg_node")
+        g.graph.wait_for_log("cpg_node", "re-entering the gait from the standing crouch", START_S)
+        rejoined = float(re.search(r"joined a running sim at ([\d.]+) s",
+                                   g.graph.procs["cpg_node"].log()).group(1))
+        assert rejoined > t_kill + HOLD_S, rejoined
+        at = g.wait_walking(WALKING_FRACTION * before, rejoined, rejoined + RECOVER_S,
+                            sim_deadline(RECOVER_S))
+        assert g.odom.fell_at is None, f"fell at {g.odom.fell_at} s after the cpg node rejoined at {rejoined}"
+        assert at is not None, f"not walking again by {rejoined + RECOVER_S} s (speed {g.odom.speed()})"
+
+        t_kill = g.odom.t
+        g.kill("pid_node")
+        g.wait_sim(t_kill + HOLD_S, sim_deadline(HOLD_S))  # the sim keeps its clock; its servos hold
+        assert g.odom.fell_at is None, f"fell at {g.odom.fell_at} s with the pid node dead (since {t_kill})"
+        assert "the servos hold their posture" in g.graph.procs["sim_node"].log()
+        g.restart("pid_node")
+        g.graph.wait_for_log("pid_node", "joined a running sim", START_S)
+        g.wait(lambda: "torques resumed" in g.graph.procs["sim_node"].log(), START_S, "torques resumed")
+        assert g.graph.procs["sim_node"].popen.poll() is None
+    for proc in g.graph.procs.values():
+        assert "Traceback" not in proc.log(), proc.log()[-3000:]
+
+
+def test_a_restarted_sim_is_survived_by_pid_and_cpg(tmp_path, ros_domain):
+    """The sim killed at 9 s and started again (its time back at 0): pid_node and cpg_node log the reset
+    and start over; the new run walks from standing (the recording's opening steps) without a fall."""
+    with _faults(tmp_path, ros_domain) as g:
+        g.start()
+        g.wait_sim(WARM_S, sim_deadline(WARM_S))
+        before = g.odom.speed(2.0)
+        assert before is not None and before > 0.03, before
+        runs = g.odom.runs
+        g.kill("sim_node")
+        g.spin(1.0)
+        g.restart("sim_node")
+        g.wait(lambda: g.odom.runs > runs, START_S, "the restarted sim's odometry")
+        g.graph.wait_for_log("pid_node", "sim restarted", START_S)
+        g.graph.wait_for_log("cpg_node", "sim restarted", START_S)
+        at = g.wait_walking(0.5 * before, 0.0, RECOVER_S, sim_deadline(RECOVER_S))
+        assert g.odom.fell_at is None, f"the new run fell at {g.odom.fell_at} s"
+        assert at is not None, f"the new run is not walking by {RECOVER_S} s (speed {g.odom.speed()})"
+        for name in ("pid_node", "cpg_node"):
+            assert g.graph.procs[name].popen.poll() is None, g.graph.procs[name].log()[-2000:]
+    for proc in g.graph.procs.values():
+        assert "Traceback" not in proc.log(), proc.log()[-3000:]
