@@ -15,10 +15,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--zeta", type=float, default=1.0, help="frequency ratio to walk at (default 1)")
     p.add_argument("--warm", type=float, default=14.0, metavar="S",
                    help="sim s of walking before the first fault (default 14)")
-    p.add_argument("--away", type=float, default=2.0, metavar="S",
-                   help="wall s between killing a node and starting it again (default 2)")
+    p.add_argument("--away", type=float, default=None, metavar="S",
+                   help="wall s between killing a node and starting it again (default 2; with --in-process: "
+                        "sim s the PID is lost, default 3)")
     p.add_argument("--nodes", default=",".join(FAULT_ORDER), metavar="A,B",
                    help=f"nodes to kill, in order (default {','.join(FAULT_ORDER)})")
+    p.add_argument("--in-process", action="store_true",
+                   help="instead: the PID lost for --away sim s at 11 phases of a stride, "
+                        "in-process; back by tracking the live gait vs re-entering it (fault_phases.json)")
     p.set_defaults(func=_run)
 
 
@@ -27,8 +31,20 @@ def _run(args: argparse.Namespace) -> int:
 
     from cpg_walker.experiments.faults import markdown_table, run_faults
 
+    if args.in_process:
+        from pathlib import Path
+
+        from cpg_walker.experiments.fault_phases import run_phases
+
+        report = run_phases(away=3.0 if args.away is None else args.away)
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "fault_phases.json").write_text(json.dumps(report, indent=1) + "\n")
+        print(json.dumps(report["summary"]))
+        return 0
     nodes = tuple(n.strip() for n in args.nodes.split(",") if n.strip())
-    report = run_faults(args.out, zeta=args.zeta, warm_s=args.warm, away_wall_s=args.away, faults=nodes)
+    away = 2.0 if args.away is None else args.away
+    report = run_faults(args.out, zeta=args.zeta, warm_s=args.warm, away_wall_s=away, faults=nodes)
     print(json.dumps(report["faults"]))
     print(markdown_table(report), end="")
     return 0

@@ -35,9 +35,10 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+from std_msgs.msg import Bool, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 from trajectory_msgs.msg import JointTrajectory
 
 from cpg_walker.nodes.messages import (
@@ -93,7 +94,8 @@ subscribes: /clock (rosgraph_msgs/Clock), /imu (sensor_msgs/Imu, frame 'imu': or
   sole load N) - the sensors of the feedback pathways, on sim time; /cmd_vel (geometry_msgs/Twist):
   followed from its first message on (cmd_vel.follow): linear.x -> zeta/alpha through the measured speed
   map, angular.z -> the heading pathway's turn rate; no message for cmd_vel.timeout sim s -> alpha 0
-  (stands), the next resumes; a sign change of linear.x stops stepping before zeta changes sign
+  (stands), the next resumes; a sign change of linear.x stops stepping before zeta changes sign;
+  /sim/servo_hold (std_msgs/Bool, latched): on its release the gait re-enters from the standing crouch
 publishes:
   /joint_targets (sensor_msgs/JointState): position + velocity of all 25 joints (the 10 CPG DOFs; the
     others follow the recording, then hold its mean), stamped with the tick (and with lookahead the next)
@@ -390,6 +392,10 @@ class CPGNode(Node):
         # /cmd_vel in the hot path too: a Twist is timed by the tick it arrives at (it has no stamp), so it
         # must not wait in the executor's queue (one callback per executor_period)
         subs.append(self.create_subscription(Twist, "/cmd_vel", self._on_cmd_vel, 10))
+        self.servos_held = self.reenter_pending = False  # the sim's servos hold: re-enter on release
+        self.reentries = 0
+        subs.append(self.create_subscription(Bool, "/sim/servo_hold", self._on_servo_hold, QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)))
         self.hot = HotPath(self, subs)
         self._diagnostics(0)
         self.get_logger().info(f"CPG N={self.ctrl.net.N} from {self.origin}; recording's opening steps "
@@ -402,17 +408,30 @@ class CPGNode(Node):
         self.walk_from_s = self.source.handover + self.source.blend
         self.rejoined_at_s: float | None = None
 
-    def _rejoin(self, t_ns: int) -> None:
-        """The first tick is at t_ns > REJOIN_AFTER_S: re-enter the gait there from the standing crouch,
-        alpha ramping up from 0 (CPGGaitSource.reenter); the parameters' zeta/alpha are commanded."""
+    def _rejoin(self, t_ns: int, why: str = "joined a running sim") -> None:
+        """Re-enter the gait at t_ns from the standing crouch, alpha ramping up from 0
+        (CPGGaitSource.reenter; the parameters' zeta/alpha are commanded): the first tick is later than
+        REJOIN_AFTER_S, or the sim's servos held the robot while the CPG went on (a controller was lost)."""
         zeta, alpha = self.get_parameter("zeta").value, self.get_parameter("alpha").value
         self.source.reenter(t_ns / 1e9, zeta, alpha)
         self.walk_from_s = self.source.handover + self.source.blend
         self.rejoined_at_s = t_ns / 1e9
+        self.reentries += 1
         self.get_logger().info(
-            f"joined a running sim at {t_ns / 1e9:.3f} s: re-entering the gait from the standing crouch "
+            f"{why} at {t_ns / 1e9:.3f} s: re-entering the gait from the standing crouch "
             f"(CPG from phase 0, alpha ramping up from 0 to {alpha:g}, cross-fade over "
             f"{self.source.blend:g} s; walking from {self.walk_from_s:.3f} s)")
+
+    def _on_servo_hold(self, msg: Bool) -> None:
+        """/sim/servo_hold: while the servos hold the robot by themselves (no torques: pid_node lost) the
+        CPG goes on stepping, so the gait's phase no longer matches the frozen robot; tracking it again
+        from mid-stride fell in 7 of 11 in-process runs. On release the gait re-enters from the crouch."""
+        if msg.data and not self.servos_held:
+            self.servos_held = True
+            self.get_logger().warn("the sim's servos hold the robot (no torques): the gait re-enters from "
+                                   "the standing crouch when they are released")
+        elif not msg.data and self.servos_held:
+            self.servos_held, self.reenter_pending = False, True
 
     def _clock_reset(self, t_ns: int) -> None:
         """/clock went back by more than CLOCK_RESET_S (a restarted sim): start over from the loaded
@@ -435,6 +454,7 @@ class CPGNode(Node):
         self.sensors_gave_up = False
         self.cmd = CmdVelFollower(self.cmd_map, self.cmd.limits, self.get_parameter("zeta").value)
         self.cmd_out, self.cmd_override = None, False
+        self.servos_held = self.reenter_pending = False
         self.clock_resets += 1
 
     def _declare_cmd_vel(self, zeta: float) -> None:
@@ -725,6 +745,9 @@ class CPGNode(Node):
         if self.last_tick_ns is None and not self.waiting and t_ns > REJOIN_AFTER_S * 1e9 \
                 and self.rejoined_at_s is None:
             self._rejoin(t_ns)
+        if self.reenter_pending and self.last_tick_ns is not None:
+            self.reenter_pending = False
+            self._rejoin(t_ns, "the servos were released")
         if self.last_tick_ns is not None and t_ns <= self.last_tick_ns:
             self._tick(t_ns)  # a re-sent (or old) tick: its targets again, from the cache
             return
@@ -972,6 +995,7 @@ class CPGNode(Node):
                                               "horizon_work": latency_summary(self.horizon_work),
                                               "feedback": feedback, "cmd_vel": self.cmd_stats,
                                               "rejoined_at_s": self.rejoined_at_s,
+                                              "reentries": self.reentries,
                                               "clock_resets": self.clock_resets}))
 
 

@@ -21,6 +21,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from cpg_walker.nodes.messages import JointStateBuilder, read_joint_command, read_joint_trajectory, stamp_ns
 from cpg_walker.nodes.runtime import (
+    CLOCK_RESET_S,
     ActivityStats,
     HotPath,
     Throttle,
@@ -106,6 +107,7 @@ class PidNode(Node):
         self.gap_warned = False
         self.tripped = False
         self.clock_resets = 0
+        self.back_ns: int | None = None  # a state stamped far back, awaiting confirmation (sim restarted?)
         self.join: tuple[int, np.ndarray] | None = None  # (first state ns, posture): joined a running sim
         self.latest_state_ns = 0
         self.last_state_ns: int | None = None
@@ -230,7 +232,14 @@ class PidNode(Node):
             self.pub.publish(self.b_tau.msg)
             return
         if clock_went_back(self.last_state_ns, t):
+            seen, self.back_ns = self.back_ns, t
+            if seen is None or not 0 <= t - seen <= CLOCK_RESET_S * 1e9:
+                self.throttle.warn(self, "state back", f"dropped /joint_states {t / 1e9:.9g} s: back from "
+                                   f"{self.last_state_ns / 1e9:.9g} s, unconfirmed (a restarted sim sends "
+                                   "the next or the same again)")
+                return
             self._clock_reset(t)
+        self.back_ns = None
         if self.last_state_ns is not None and t < self.last_state_ns:
             return  # older than what was answered: stale duplicate
         self.latest_state_ns = max(self.latest_state_ns, t)
@@ -253,7 +262,8 @@ class PidNode(Node):
         return q0 + w * (q_ref - q0), w * v_ref + dw * (q_ref - q0)
 
     def _clock_reset(self, t_ns: int) -> None:
-        """A state stamped more than CLOCK_RESET_S before the last answered one: the sim has restarted.
+        """A state stamped more than CLOCK_RESET_S before the last answered one, confirmed by the next (a
+        single stray one is dropped): the sim has restarted.
         Start over as a fresh node: targets and horizon forgotten, the standing crouch, integral 0."""
         self.get_logger().warn(f"/joint_states went back from {self.last_state_ns / 1e9:.3f} s to "
                                f"{t_ns / 1e9:.3f} s (sim restarted): starting over")

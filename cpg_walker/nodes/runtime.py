@@ -392,9 +392,15 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
         print(f"{argv[0]}: error: {exc}", file=sys.stderr)  # bad parameters at start-up: one line
         status = 2
     except Exception:
+        # a signal arriving mid-call (publish, wait, a message's conversion: "Unable to convert call
+        # argument" was seen on a SIGINT) is a normal stop: rclpy's handler shuts the context down
+        import time
+
+        give_up = time.monotonic() + 1.0
+        while rclpy.ok() and time.monotonic() < give_up:
+            time.sleep(0.01)
         if rclpy.ok():
             raise
-        # a signal shut the context down mid-call (publish, wait): that is a normal stop
     finally:
         import signal
 

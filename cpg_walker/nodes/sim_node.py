@@ -98,7 +98,8 @@ INTERFACE = """\
 publishes: /clock (rosgraph_msgs/Clock), /joint_states (sensor_msgs/JointState: position, velocity,
   effort of all 25 joints), /imu (sensor_msgs/Imu, frame 'imu'), /foot_load/left and /foot_load/right
   (geometry_msgs/WrenchStamped, sole frames), /odom/ground_truth (nav_msgs/Odometry, evaluation only),
-  /sim/fallen (std_msgs/Bool, latched), /diagnostics (diagnostic_msgs/DiagnosticArray),
+  /sim/fallen (std_msgs/Bool, latched), /sim/servo_hold (std_msgs/Bool, latched: the servos hold by
+  themselves, no controller), /diagnostics (diagnostic_msgs/DiagnosticArray),
   /robot_description (std_msgs/String: the URDF, latched; with publish_description), /tf (tf2_msgs/TFMessage:
   odom -> base_link each period; only where tf2_msgs is installed, i.e. a ROS install)
 subscribes: /joint_torques (sensor_msgs/JointState: name + effort in N*m, stamp = the state it answers)
@@ -204,6 +205,8 @@ class SimNode(Node):
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_fallen = self.create_publisher(Bool, "/sim/fallen", latched)
+        self.pub_hold = self.create_publisher(Bool, "/sim/servo_hold", latched)  # on each change
+        self.pub_hold.publish(Bool(data=False))
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         if describe:  # once: transient local hands it to subscribers that join later
             self.pub_description = self.create_publisher(String, "/robot_description", latched)
@@ -304,6 +307,7 @@ class SimNode(Node):
         if self.tau_stamp < 0 or not self.servo.after_ns or t_ns - self.tau_stamp <= self.servo.after_ns:
             if self.servo.active:
                 self.servo.active = False
+                self.pub_hold.publish(Bool(data=False))
                 self.get_logger().info(f"torques resumed at sim {t_ns / 1e9:.3f} s: servo hold off")
             return self.tau
         sim = self.sim
@@ -312,6 +316,7 @@ class SimNode(Node):
             self.get_logger().warn(
                 f"no torque newer than {self.tau_stamp / 1e9:.3f} s at sim {t_ns / 1e9:.3f} s: the servos "
                 "hold their posture")
+            self.pub_hold.publish(Bool(data=True))
         return self.servo.torque(q, qd, self.period_ns / 1e9)
 
     def _on_reset(self, request, response):

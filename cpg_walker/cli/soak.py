@@ -1,0 +1,30 @@
+"""`cpg-walker soak --out DIR`: the graph walks minutes of sim time (realtime pacing) with a zeta/alpha
+or /cmd_vel change every 20 s; fell or not, each node's memory, late commands and overruns over time;
+DIR/soak.json and DIR/soak.md (experiments/soak.py). The last result is committed as docs/soak.json."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("soak", help="walk the graph for minutes with changes every 20 s; memory, overruns")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--minutes", type=float, default=10.0, help="sim minutes to walk (default 10)")
+    p.add_argument("--period", type=float, default=20.0, metavar="S",
+                   help="sim s between changes (default 20)")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    import sys
+    from pathlib import Path
+
+    from cpg_walker.experiments.soak import markdown, run_soak
+
+    report = run_soak(args.out, minutes=args.minutes, period=args.period,
+                      say=lambda text: print(f"soak: {text}", file=sys.stderr, flush=True))
+    table = markdown(report)
+    (Path(args.out) / "soak.md").write_text(table)
+    print(table, end="")
+    return 1 if report["fell"] else 0
