@@ -24,7 +24,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 NODES = {"sim_node": "sim", "pid_node": "pid", "cpg_node": "cpg"}
 #: The topics the nodes subscribe to, each fuzzed with MESSAGES_PER_TOPIC messages.
 TOPICS = ("/joint_targets", "/joint_torques", "/imu", "/foot_load/left", "/foot_load/right", "/clock",
-          "/cmd_vel", "/joint_trajectory")
+          "/cmd_vel", "/joint_trajectory", "/sim/servo_hold")
 MESSAGES_PER_TOPIC = 12
 #: Wild values (any type) sent to randomly drawn parameters of each node (each parameter also gets one
 #: value of a type other than its declared one).
@@ -239,6 +239,7 @@ def _messages(draw, topic: str | None = None) -> tuple[str, object]:
     from geometry_msgs.msg import Twist, WrenchStamped
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu
+    from std_msgs.msg import Bool
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
     from cpg_walker.robot.frames import FOOT_LOAD_FRAMES, IMU_FRAME
@@ -263,6 +264,8 @@ def _messages(draw, topic: str | None = None) -> tuple[str, object]:
         msg = Clock()
         msg.clock.sec, msg.clock.nanosec = draw(_stamps())
         return topic, msg
+    elif topic == "/sim/servo_hold":  # a Bool cannot be malformed: a wild sequence (re-entries, no crash)
+        return topic, Bool(data=draw(st.booleans()))
     elif topic == "/cmd_vel":
         msg = Twist()
         msg.linear.x, msg.linear.y, msg.angular.z = draw(st.tuples(FLOATS, FLOATS, FLOATS))
@@ -300,15 +303,20 @@ def _cpg_diagnostics(walking) -> dict:
 
 def test_malformed_messages_on_every_topic_never_reach_the_simulation(walking):
     from geometry_msgs.msg import Twist, WrenchStamped
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu, JointState
+    from std_msgs.msg import Bool
     from trajectory_msgs.msg import JointTrajectory
 
     types = {"/joint_targets": JointState, "/joint_torques": JointState, "/imu": Imu,
              "/foot_load/left": WrenchStamped, "/foot_load/right": WrenchStamped, "/clock": Clock,
-             "/cmd_vel": Twist, "/joint_trajectory": JointTrajectory}
+             "/cmd_vel": Twist, "/joint_trajectory": JointTrajectory, "/sim/servo_hold": Bool}
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)  # as the sim's
     probe = walking.probe
-    pubs = {topic: probe.node.create_publisher(cls, topic, 10) for topic, cls in types.items()}
+    pubs = {topic: probe.node.create_publisher(cls, topic, latched if cls is Bool else 10)
+            for topic, cls in types.items()}
     for topic in types:
         probe.wait_endpoints(topic, subscribers=1)
     sent: dict[str, int] = {}

@@ -65,18 +65,38 @@ def test_cpg_node_drops_a_stray_clock_jump_and_takes_a_confirmed_one():
     """Defect: one /clock sample far in the future froze the walk (every real tick after it looked old)."""
     import rclpy
 
-    from cpg_walker.nodes.cpg_node import CLOCK_JUMP_NS, CPGNode
-    from cpg_walker.nodes.runtime import params_file
+    from cpg_walker.nodes.cpg_node import CPGNode
+    from cpg_walker.nodes.runtime import CLOCK_JUMP_NS, StampGuard, params_file
 
     ctx, node = _in_process(lambda ctx: CPGNode(context=ctx, cli_args=[
         "--ros-args", "--params-file", str(params_file("cpg"))]))
     try:
         node.last_tick_ns = 10_000_000_000
-        assert node._clock_jump(2**62) and node.sensor_stats["clock_dropped"] == 1  # stray: dropped
-        assert not node._clock_jump(10_002_000_000)  # the real clock goes on
+        assert node._clock_jump(2**62) == StampGuard.DROP and node.sensor_stats["clock_dropped"] == 1
+        assert node._clock_jump(10_002_000_000) == StampGuard.TAKE  # the real clock goes on
         far = 10_000_000_000 + 5 * CLOCK_JUMP_NS
-        assert node._clock_jump(far)  # a real jump: dropped once ...
-        assert not node._clock_jump(far + 2_000_000)  # ... taken when the next tick continues from it
+        assert node._clock_jump(far) == StampGuard.DROP  # a real jump: dropped once ...
+        assert node._clock_jump(far + 2_000_000) == StampGuard.TAKE  # ... taken when the next continues it
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_stamp_guard_confirms_jumps_both_ways():
+    """A stamp far ahead or far back is dropped until the next continues from it; a confirmed jump back
+    is a restarted sim (RESET), also when the same first state is re-sent (lockstep); small steps back
+    (re-sent or stale messages) and normal steps are taken as they are."""
+    from cpg_walker.nodes.runtime import CLOCK_JUMP_NS, CLOCK_RESET_S, StampGuard
+
+    g, t = StampGuard(), 50_000_000_000
+    assert g.judge(None, 0) == StampGuard.TAKE and g.judge(t, t + 2_000_000) == StampGuard.TAKE
+    assert g.judge(t, t - 500_000_000) == StampGuard.TAKE  # less than CLOCK_RESET_S back: the node's call
+    assert g.judge(t, 0) == StampGuard.DROP  # one stray old stamp ...
+    assert g.judge(t, t + 2_000_000) == StampGuard.TAKE  # ... forgotten when the real ones go on
+    assert g.judge(t, 0) == StampGuard.DROP and g.judge(t, 0) == StampGuard.RESET  # re-sent: a restart
+    assert g.judge(t, 0) == StampGuard.DROP and g.judge(t, 2_000_000) == StampGuard.RESET  # continued
+    assert g.judge(t, 0) == StampGuard.DROP and g.judge(t, t + 2 * CLOCK_JUMP_NS) == StampGuard.DROP
+    assert g.judge(t, t + 2 * CLOCK_JUMP_NS + 2_000_000) == StampGuard.TAKE  # a confirmed jump ahead
+    assert g.judge(t, t + 2 * CLOCK_JUMP_NS) == StampGuard.DROP
+    assert g.judge(t, t + 2 * CLOCK_JUMP_NS) == StampGuard.DROP  # the same far-ahead stamp twice: not
+    assert g.dropped == 7 and CLOCK_RESET_S * 1e9 < t

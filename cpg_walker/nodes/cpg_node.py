@@ -53,10 +53,10 @@ from cpg_walker.nodes.messages import (
 from cpg_walker.nodes.runtime import (
     ActivityStats,
     HotPath,
+    StampGuard,
     Throttle,
     TickStats,
     bool_param,
-    clock_went_back,
     declare,
     declare_scheduling,
     exit_log,
@@ -158,9 +158,6 @@ def turn_unavailable(enabled: bool, weight: float, pathways: tuple[str, ...]) ->
     return ""
 
 
-#: A /clock tick more than this past the last one is taken only once the next tick confirms it (a stray
-#: far-future stamp would otherwise freeze the walk; see CPGNode._clock_jump).
-CLOCK_JUMP_NS = 1_000_000_000
 #: Sensor samples kept per topic, by stamp (lockstep takes the one stamped like its tick).
 SENSOR_KEEP = 32
 #: FeedbackConfig field types exposed as ROS parameters, and their parameter descriptors' makers.
@@ -379,7 +376,7 @@ class CPGNode(Node):
         self.waiting: deque[tuple[int, float]] = deque()  # lockstep: ticks waiting for their samples
         self.sensors_gave_up = False  # a lockstep wait timed out: no waiting until the samples catch up
         self.sensor_stats = {"dropped": 0, "wait_timeouts": 0, "clock_dropped": 0}
-        self.clock_jump_ns: int | None = None  # a tick far from the last, awaiting confirmation
+        self.clock_guard = StampGuard()  # a tick far from the last awaits confirmation
         self.clock_resets = 0
         self.fb_state = self.fade.state(self.fb_enabled)
         self.fb_age: float | None = None
@@ -738,9 +735,10 @@ class CPGNode(Node):
     # ---------------------------------------------------------------- clock
     def _on_clock(self, msg: Clock) -> None:
         t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
-        if self._clock_jump(t_ns):
+        verdict = self._clock_jump(t_ns)
+        if verdict == StampGuard.DROP:
             return
-        if clock_went_back(self.last_tick_ns, t_ns):
+        if verdict == StampGuard.RESET:
             self._clock_reset(t_ns)
         if self.last_tick_ns is None and not self.waiting and t_ns > REJOIN_AFTER_S * 1e9 \
                 and self.rejoined_at_s is None:
@@ -756,27 +754,17 @@ class CPGNode(Node):
         self.waiting.append((t_ns, time.monotonic()))
         self._run_waiting()
 
-    def _clock_jump(self, t_ns: int) -> bool:
-        """Whether to drop the tick t_ns as a stray: more than CLOCK_JUMP_NS past the last tick or more
-        than CLOCK_RESET_S before it, and not (yet) confirmed by a later tick continuing from it within
-        CLOCK_JUMP_NS (going back: or the same tick again, as a restarted lockstep sim re-sends its first).
-        One /clock sample far in the future (a corrupt stamp, a second publisher) would otherwise end the
-        walk, every real tick after it looking old; one from the past would start the CPG over. A real
-        jump (the node stalled, the sim restarted) is taken one tick later."""
-        last, seen = self.last_tick_ns, self.clock_jump_ns
-        ahead = last is not None and t_ns - last > CLOCK_JUMP_NS
-        if not ahead and not clock_went_back(last, t_ns):
-            self.clock_jump_ns = None
-            return False
-        if seen is not None and (0 < t_ns - seen <= CLOCK_JUMP_NS or (not ahead and t_ns == seen)):
-            self.clock_jump_ns = None
-            return False
-        self.clock_jump_ns = t_ns
-        self.sensor_stats["clock_dropped"] += 1
-        self.throttle.warn(self, "/clock jump", f"dropped /clock {t_ns / 1e9:.9g} s: "
-                           f"{'far past' if ahead else 'back from'} the last tick {last / 1e9:.9g} s, "
-                           "unconfirmed")
-        return True
+    def _clock_jump(self, t_ns: int) -> str:
+        """The StampGuard's verdict on the tick t_ns (a stray far-future tick would otherwise end the walk,
+        every real tick after it looking old; a stray old one would start the CPG over); a drop is
+        counted (``clock_dropped``) and warned about, throttled."""
+        last = self.last_tick_ns
+        verdict = self.clock_guard.judge(last, t_ns)
+        if verdict == StampGuard.DROP:
+            self.sensor_stats["clock_dropped"] += 1
+            self.throttle.warn(self, "/clock jump", f"dropped /clock {t_ns / 1e9:.9g} s: far from the last "
+                               f"tick {last / 1e9:.9g} s, unconfirmed")
+        return verdict
 
     def _run_waiting(self) -> None:
         """Run the queued ticks, in order, whose sensor samples are there (or need not be waited for)."""

@@ -21,12 +21,11 @@ from trajectory_msgs.msg import JointTrajectory
 
 from cpg_walker.nodes.messages import JointStateBuilder, read_joint_command, read_joint_trajectory, stamp_ns
 from cpg_walker.nodes.runtime import (
-    CLOCK_RESET_S,
     ActivityStats,
     HotPath,
+    StampGuard,
     Throttle,
     bool_param,
-    clock_went_back,
     declare,
     declare_scheduling,
     exit_log,
@@ -107,7 +106,7 @@ class PidNode(Node):
         self.gap_warned = False
         self.tripped = False
         self.clock_resets = 0
-        self.back_ns: int | None = None  # a state stamped far back, awaiting confirmation (sim restarted?)
+        self.stamp_guard = StampGuard()  # a state stamped far from the last awaits confirmation
         self.join: tuple[int, np.ndarray] | None = None  # (first state ns, posture): joined a running sim
         self.latest_state_ns = 0
         self.last_state_ns: int | None = None
@@ -231,15 +230,14 @@ class PidNode(Node):
         if t == self.answered_ns:  # a re-sent state: answer again, identically
             self.pub.publish(self.b_tau.msg)
             return
-        if clock_went_back(self.last_state_ns, t):
-            seen, self.back_ns = self.back_ns, t
-            if seen is None or not 0 <= t - seen <= CLOCK_RESET_S * 1e9:
-                self.throttle.warn(self, "state back", f"dropped /joint_states {t / 1e9:.9g} s: back from "
-                                   f"{self.last_state_ns / 1e9:.9g} s, unconfirmed (a restarted sim sends "
-                                   "the next or the same again)")
-                return
+        verdict = self.stamp_guard.judge(self.last_state_ns, t)
+        if verdict == StampGuard.DROP:
+            self.throttle.warn(self, "state jump", f"dropped /joint_states {t / 1e9:.9g} s: far from the "
+                               f"last {self.last_state_ns / 1e9:.9g} s, unconfirmed (a restarted sim sends "
+                               "the next or the same again)")
+            return
+        if verdict == StampGuard.RESET:
             self._clock_reset(t)
-        self.back_ns = None
         if self.last_state_ns is not None and t < self.last_state_ns:
             return  # older than what was answered: stale duplicate
         self.latest_state_ns = max(self.latest_state_ns, t)

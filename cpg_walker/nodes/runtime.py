@@ -23,9 +23,41 @@ PACINGS = ("realtime", "fast", "lockstep")
 CLOCK_RESET_S = 1.0
 
 
+#: A stamp more than this past the newest one taken is taken only once the next confirms it (a stray
+#: far-future stamp would otherwise make every real message after it look old: StampGuard).
+CLOCK_JUMP_NS = 1_000_000_000
+
+
 def clock_went_back(newest_ns: int | None, t_ns: int) -> bool:
     """True when ``t_ns`` lies more than CLOCK_RESET_S before ``newest_ns``: the sim has restarted."""
     return newest_ns is not None and newest_ns - t_ns > CLOCK_RESET_S * 1e9
+
+
+class StampGuard:
+    """Judges each stamp against the newest one taken: a jump (more than CLOCK_JUMP_NS ahead, or more
+    than CLOCK_RESET_S back) is a stray until the next stamp confirms it by continuing from it within
+    CLOCK_JUMP_NS (going back, the same stamp again confirms it too: a restarted lockstep sim re-sends
+    its first state). One stray message (a corrupt stamp, a second publisher) neither freezes a node nor
+    restarts it; a real jump (a stall, a restarted sim) is taken one message later."""
+
+    TAKE, DROP, RESET = "take", "drop", "reset"
+
+    def __init__(self) -> None:
+        self.pending: int | None = None
+        self.dropped = 0
+
+    def judge(self, newest_ns: int | None, t_ns: int) -> str:
+        """TAKE (no jump, or a confirmed one ahead), RESET (a confirmed jump back) or DROP."""
+        ahead = newest_ns is not None and t_ns - newest_ns > CLOCK_JUMP_NS
+        if not ahead and not clock_went_back(newest_ns, t_ns):
+            self.pending = None
+            return self.TAKE
+        seen, self.pending = self.pending, t_ns
+        if seen is not None and (0 < t_ns - seen <= CLOCK_JUMP_NS or (not ahead and t_ns == seen)):
+            self.pending = None
+            return self.TAKE if ahead else self.RESET
+        self.dropped += 1
+        return self.DROP
 #: Each node executable's ROS node name; its parameters are config/<node name>.yaml (``params_file``).
 NODE_NAMES = {"sim_node": "sim", "pid_node": "pid", "target_player_node": "target_player", "cpg_node": "cpg",
               "recorder_node": "recorder", "foxglove_node": "foxglove"}
