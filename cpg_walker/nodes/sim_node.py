@@ -62,6 +62,7 @@ from cpg_walker.robot.contact import sole_wrenches
 from cpg_walker.robot.frames import odom_transform
 from cpg_walker.robot.hoap2 import Hoap2Sim
 from cpg_walker.robot.joints import JOINT_NAMES
+from cpg_walker.robot.pid import ServoHold
 from cpg_walker.robot.pusher import Pusher
 from cpg_walker.robot.run_record import RunRecord
 from cpg_walker.robot.urdf import read_urdf
@@ -70,29 +71,6 @@ try:  # tf2_msgs is not on PyPI: a pip-only install has no live /tf (recordings 
     from tf2_msgs.msg import TFMessage
 except ImportError:
     TFMessage = None
-
-class ServoHold:
-    """The servo drives' own watchdog (a real drive holds its position when its controller goes quiet):
-    after ``after_s`` sim s without a new torque, the joints hold the posture measured at that moment
-    through the PID law with config/pid.yaml's gains; off again with the next fresh torque. (Blending to
-    the standing crouch from mid-stride instead fell within 1 s: measured, docs "Faults".)"""
-
-    def __init__(self, after_s: float) -> None:
-        from cpg_walker.robot.pid import PidLaw, load_pid_config
-
-        self.after_ns = round(after_s * 1e9)
-        self.law = PidLaw.from_config(config=load_pid_config())
-        self.active = False
-        self.entries = 0
-        self.q0: np.ndarray | None = None
-
-    def torque(self, q: np.ndarray, qd: np.ndarray, dt: float) -> np.ndarray:
-        if not self.active:
-            self.active, self.q0 = True, np.array(q, dtype=float)
-            self.law.integral[:] = 0.0
-            self.entries += 1
-        return self.law.step(self.q0, np.zeros_like(self.q0), q, qd, dt)
-
 
 INTERFACE = """\
 publishes: /clock (rosgraph_msgs/Clock), /joint_states (sensor_msgs/JointState: position, velocity,

@@ -245,3 +245,26 @@ def _lean_pd_kernel(compiled: bool | None) -> Callable | None:
     if _KERNEL is None and compiled:
         raise ImportError("compiled PID law requested but numba is not installed (pip install numba)")
     return _KERNEL  # type: ignore[return-value]
+
+
+class ServoHold:
+    """The servo drives' own watchdog (a real drive holds its position when its controller goes quiet):
+    after ``after_s`` sim s without a new torque the joints hold the posture measured at that moment
+    through the PID law with config/pid.yaml's gains (sim_node), until the next fresh torque. Blending to
+    the standing crouch from mid-stride instead fell within 1 s (measured: docs/ROS_INTERFACE.md,
+    "Faults")."""
+
+    def __init__(self, after_s: float) -> None:
+        self.after_ns = round(after_s * 1e9)
+        self.law = PidLaw.from_config(config=load_pid_config())
+        self.active = False
+        self.entries = 0
+        self.q0: np.ndarray | None = None
+
+    def torque(self, q: np.ndarray, qd: np.ndarray, dt: float) -> np.ndarray:
+        """The hold's torque for the measured state; the first call after a release takes the posture."""
+        if not self.active:
+            self.active, self.q0 = True, np.array(q, dtype=float)
+            self.law.integral[:] = 0.0
+            self.entries += 1
+        return self.law.step(self.q0, np.zeros_like(self.q0), q, qd, dt)
