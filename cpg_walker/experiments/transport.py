@@ -155,8 +155,8 @@ def run_transport(out_dir: str | Path, zetas=ZETAS, losses=LOSSES, delays_s=DELA
     report = {
         "command": command, "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
         "duration_s": duration, "pacing": "realtime",
-        "sim_overrides": "max_torque_age = config/sim.yaml's + delay + jitter (+ one period with loss; each run's "
-                         "sim_overrides); pid_node startup_wait " + f"{STARTUP_WAIT_S:g} s",
+        "sim_overrides": "max_torque_age = config/sim.yaml's + delay + jitter (+ one period with loss; "
+                         f"each run's sim_overrides); pid_node startup_wait {STARTUP_WAIT_S:g} s",
         "relayed": "pid_node: /joint_targets, /joint_states; cpg_node: /imu (relay_node, config/relay.yaml)",
         "grid": {"loss": list(losses), "delay_s": list(delays_s), "jitter": f"{JITTER_FRACTION:g} x delay"},
         "seed": seed, "cpus": os.cpu_count(), "wall_s": round(time.monotonic() - started, 1),
