@@ -13,6 +13,7 @@ import math
 from types import SimpleNamespace
 
 import pytest
+from ros_helpers import START_S
 
 from cpg_walker.nodes.lossy_link import LossyLink, link_error
 from cpg_walker.paths import ros_parameters
@@ -21,8 +22,9 @@ from cpg_walker.paths import ros_parameters
 DURATION_S, LOSS, DELAY_S, JITTER_S = 1.5, 0.05, 0.002, 0.001
 #: The sim re-sends an unanswered state after 20 ms instead of the file's 0.1 s (wall): a dropped state,
 #: target (cpg_node re-sends a re-sent tick's targets) or /imu sample costs that much wall time. The
-#: controllers keep their files' waits, far longer, so a loaded machine does not trip them.
-FAST_RESEND = {"sim_node": {"lockstep_resend": 0.02}}
+#: controllers keep their files' waits, far longer, so a loaded machine does not trip them; pid_node waits
+#: for cpg_node's first target as long as a node may take to start (a starved cpg_node once took > 30 s).
+NODE_PARAMS = {"sim_node": {"lockstep_resend": 0.02}, "pid_node": {"startup_wait": START_S}}
 RELAY = ros_parameters("relay.yaml", "relay")
 
 
@@ -41,7 +43,7 @@ def walk(tmp_path_factory):
             mp.setattr(graph_module, "quiet_domain_id", lambda attempts=5: domain)
             report = run_graph_walk(out, duration=DURATION_S, pacing="lockstep", zeta=1.0, feedback=True,
                                     relay={"loss": LOSS, "delay": DELAY_S, "jitter": JITTER_S, "seed": 7},
-                                    node_params=FAST_RESEND, timeout=sim_deadline(DURATION_S))
+                                    node_params=NODE_PARAMS, timeout=sim_deadline(DURATION_S))
     finally:
         left = kill_nodes(domain)
         lock.close()
