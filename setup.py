@@ -15,6 +15,7 @@ NODES: dict[str, str] = {
     "cpg_node": "cpg_walker.nodes.cpg_node:main",
     "recorder_node": "cpg_walker.nodes.recorder_node:main",
     "foxglove_node": "cpg_walker.nodes.foxglove_node:main",
+    "relay_node": "cpg_walker.nodes.relay_node:main",
 }
 TOOLS = {
     "cpg-walker": "cpg_walker.cli.main:main",

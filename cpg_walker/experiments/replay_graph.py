@@ -24,6 +24,7 @@ import numpy as np
 
 from cpg_walker.nodes.graph import Graph
 from cpg_walker.nodes.recorder_node import NAME as RECORDER_NAME
+from cpg_walker.nodes.relay_node import consumer_remaps
 from cpg_walker.nodes.runtime import PACINGS
 
 
@@ -101,6 +102,7 @@ def run_graph(
     attach: Callable[[Graph], list[subprocess.Popen]] | None = None,
     bag_dir: str | Path | None = None,
     domain_id: int | None = None,
+    relay: dict | None = None,
 ) -> GraphRun:
     """Run sim_node + pid_node (+ ``target`` node with ``target_params``) for ``duration`` sim seconds.
     Each node gets its parameters file (config/<node>.yaml), then these arguments as overrides
@@ -113,7 +115,10 @@ def run_graph(
     graph's domain (subscribers, a CPU load) and returns them: they are stopped when the sim has finished.
     ``bag_dir``: record every topic to ``bag_dir/recording.mcap`` (recorder_node, started first and
     stopped last; the sim holds its first state until the recorder subscribes to it). ``domain_id``: the
-    graph's DDS domain (None: a free one). Raises RuntimeError (with the sim's log tail) if the sim fails."""
+    graph's DDS domain (None: a free one). ``relay``: start relay_node (these parameter overrides of
+    config/relay.yaml) before the others and route the consumers of its topics through it (remaps:
+    nodes/relay_node.py ``consumer_remaps``). Raises RuntimeError (with the sim's log tail) if the sim
+    fails."""
     from cpg_walker.robot.run_record import RunRecord
 
     if pacing not in PACINGS:
@@ -127,10 +132,15 @@ def run_graph(
     with Graph(work / f"{tag}_logs", domain_id=domain_id) as g:
         if bag_dir is not None:
             start_recorder(g, bag_dir, timeout)
-        g.start("pid_node", **{"lockstep": pacing == "lockstep", "wait_for_targets": target is not None,
-                               **(pid_params or {}), **more.get("pid_node", {})})
+        remaps: dict[str, dict[str, str]] = {}
+        if relay is not None:
+            remaps = consumer_remaps(relay)
+            g.start("relay_node", **relay, **more.get("relay_node", {}))
+        g.start("pid_node", remaps=remaps.get("pid_node"),
+                **{"lockstep": pacing == "lockstep", "wait_for_targets": target is not None,
+                   **(pid_params or {}), **more.get("pid_node", {})})
         if target is not None:
-            g.start(target, **(target_params or {}), **more.get(target, {}))
+            g.start(target, remaps=remaps.get(target), **(target_params or {}), **more.get(target, {}))
         period = {} if control_period is None else {"control_period": float(control_period)}
         waits = {} if bag_dir is None else {"wait_for_subscriber": RECORDER_NAME}  # bag from t = 0
         g.start("sim_node", pacing=pacing, duration=float(duration), stop_on_fall=stop_on_fall,

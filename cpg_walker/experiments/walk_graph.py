@@ -176,6 +176,8 @@ def run_graph_walk(
     domain_id: int | None = None,
     watchers: Sequence[Watcher] = (),
     foxglove: str | None = None,
+    relay: dict | None = None,
+    node_params: dict[str, dict] | None = None,
 ) -> dict:
     """Walk through sim_node + pid_node + cpg_node; write ``walk.json``; return its content. ``record``:
     every topic also to ``out_dir/recording.mcap`` (recorder_node; walk.json's ``bag``). ``zeta``,
@@ -184,7 +186,9 @@ def run_graph_walk(
     ``domain_id``: the graph's DDS domain (None: a free one). ``watchers`` are started on the graph's domain
     once its nodes are (e.g. a live status) and stopped when it has finished, however it ends.
     ``foxglove``: ``[HOST:]PORT`` ('' = 127.0.0.1:8765) of a Foxglove live view (foxglove_node) on the
-    graph; its URL is printed to stderr once it listens."""
+    graph; its URL is printed to stderr once it listens. ``relay``: a degraded link (relay_node with these
+    overrides of config/relay.yaml) in front of the controllers (replay_graph.run_graph); walk.json's
+    ``relay`` holds its counters. ``node_params``: more overrides by node executable."""
     from cpg_walker.experiments.replay_graph import run_graph
     from cpg_walker.nodes.runtime import PACINGS
     from cpg_walker.walker.learning import load_controller
@@ -243,7 +247,8 @@ def run_graph_walk(
         run = run_graph(out, "cpg_node", cpg_params, duration=duration, pacing=pacing,
                         control_period=control_period, stop_on_fall=stop_on_fall, timeout=limit,
                         pid_params={"startup_wait": LEARN_WAIT_S} if learn_now else None, attach=attach,
-                        bag_dir=out if record else None, domain_id=domain_id)
+                        bag_dir=out if record else None, domain_id=domain_id, relay=relay,
+                        node_params=node_params)
     finally:
         for c in [*changes, *started]:
             c.stop()
@@ -258,6 +263,9 @@ def run_graph_walk(
     cpg_stats = re.findall(r"stats (\{.*\})", run.logs.get("cpg_node", ""))
     if cpg_stats:
         report["cpg_feedback"] = json.loads(cpg_stats[-1]).get("feedback")
+    if relay is not None:
+        relay_stats = re.findall(r"stats (\{.*\})", run.logs.get("relay_node", ""))
+        report["relay"] = json.loads(relay_stats[-1])["topics"] if relay_stats else None
     if record:
         report["bag"] = str((out / f"{BAG_NAME}.mcap").resolve())
     if schedule:

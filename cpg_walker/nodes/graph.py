@@ -18,6 +18,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -133,23 +134,25 @@ class Graph:
         self.use_sim_time = use_sim_time
         self.procs: dict[str, NodeProcess] = {}
 
-    def command(self, node: str, params: dict) -> list[str]:
+    def command(self, node: str, params: dict, remaps: Mapping[str, str] | None = None) -> list[str]:
         """The node's command line: its parameters file (config/<node name>.yaml), then ``params`` as
-        ``-p`` overrides (after the file, so they win)."""
+        ``-p`` overrides (after the file, so they win), then ``remaps`` (topic -> topic) as ``-r``."""
         if node not in NODES:
             raise ValueError(f"unknown node {node!r}; known: {NODES}")
         args = [sys.executable, "-m", f"cpg_walker.nodes.{node}", "--ros-args",
                 "--params-file", str(params_file(NODE_NAMES[node]))]
         for name, value in {"use_sim_time": self.use_sim_time, **params}.items():
             args += ["-p", param_arg(name.replace("__", "."), value)]
+        for src, dst in (remaps or {}).items():
+            args += ["-r", f"{src}:={dst}"]
         return args
 
-    def start(self, node: str, **params: object) -> NodeProcess:
+    def start(self, node: str, remaps: Mapping[str, str] | None = None, **params: object) -> NodeProcess:
         """Start ``node`` with its parameters file and ``params`` overriding it (``push__force=[..]`` for
-        ``push.force``)."""
+        ``push.force``); ``remaps``: topic names the node uses -> the ones it gets (``-r from:=to``)."""
         log_path = self.log_dir / f"{node}.log"
         with open(log_path, "wb") as log:
-            popen = subprocess.Popen(self.command(node, params), env=self.env, stdout=log,
+            popen = subprocess.Popen(self.command(node, params, remaps), env=self.env, stdout=log,
                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                      start_new_session=True)
         proc = NodeProcess(node, popen, log_path, time.monotonic())

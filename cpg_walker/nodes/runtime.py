@@ -60,7 +60,7 @@ class StampGuard:
         return self.DROP
 #: Each node executable's ROS node name; its parameters are config/<node name>.yaml (``params_file``).
 NODE_NAMES = {"sim_node": "sim", "pid_node": "pid", "target_player_node": "target_player", "cpg_node": "cpg",
-              "recorder_node": "recorder", "foxglove_node": "foxglove"}
+              "recorder_node": "recorder", "foxglove_node": "foxglove", "relay_node": "relay"}
 
 
 def parse_cli(prog: str, description: str, interface: str, argv: list[str] | None = None) -> list[str]:

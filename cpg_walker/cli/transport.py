@@ -1,0 +1,52 @@
+"""`cpg-walker transport --out DIR`: the largest loss and delay of the controllers' topics at which the CPG
+walk still walks (realtime walks through relay_node; experiments/transport.py). Writes DIR/transport.json,
+DIR/transport.md and DIR/transport.png."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def _floats(text: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from cpg_walker.experiments import transport as t
+
+    p = sub.add_parser("transport", help="largest loss / delay of the controllers' topics the walk survives "
+                                         "(realtime, relay_node); write transport.json/.md/.png")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--duration", type=float, default=30.0, metavar="S",
+                   help="sim s of each walk (default 30)")
+    p.add_argument("--zetas", type=_floats, default=list(t.ZETAS), metavar="Z,Z",
+                   help=f"zeta values (default {','.join(map(str, t.ZETAS))}); each with feedback on and off")
+    p.add_argument("--losses", type=_floats, default=list(t.LOSSES), metavar="L,L",
+                   help=f"loss fractions tried in order (default {','.join(map(str, t.LOSSES))})")
+    p.add_argument("--delays-ms", type=_floats, default=[d * 1e3 for d in t.DELAYS_S], metavar="D,D",
+                   help="delays (ms) tried in order, jitter half of each (default "
+                        f"{','.join(f'{d * 1e3:g}' for d in t.DELAYS_S)})")
+    p.add_argument("--seed", type=int, default=1, help="relay_node's seed (default 1)")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    import shlex
+    import sys
+
+    from cpg_walker.experiments.transport import run_transport
+
+    for name, values, hi in (("--losses", args.losses, 1.0), ("--delays-ms", args.delays_ms, 10_000.0)):
+        if not values or any(not 0 < v <= hi for v in values):
+            raise ValueError(f"{name} must be numbers in (0, {hi:g}], got {values}")
+    command = "cpg-walker " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    report = run_transport(args.out, zetas=args.zetas, losses=args.losses,
+                           delays_s=[d / 1e3 for d in args.delays_ms], duration=args.duration, seed=args.seed,
+                           command=command)
+    from cpg_walker.experiments.transport import markdown_table
+
+    print(markdown_table(report), end="")
+    return 0
