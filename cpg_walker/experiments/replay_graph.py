@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpg_walker.nodes.graph import Graph
+from cpg_walker.nodes.graph import Graph, Placement
 from cpg_walker.nodes.recorder_node import NAME as RECORDER_NAME
 from cpg_walker.nodes.runtime import PACINGS
 
@@ -101,6 +101,7 @@ def run_graph(
     attach: Callable[[Graph], list[subprocess.Popen]] | None = None,
     bag_dir: str | Path | None = None,
     domain_id: int | None = None,
+    placement: dict[str, Placement] | None = None,
 ) -> GraphRun:
     """Run sim_node + pid_node (+ ``target`` node with ``target_params``) for ``duration`` sim seconds.
     Each node gets its parameters file (config/<node>.yaml), then these arguments as overrides
@@ -113,7 +114,8 @@ def run_graph(
     graph's domain (subscribers, a CPU load) and returns them: they are stopped when the sim has finished.
     ``bag_dir``: record every topic to ``bag_dir/recording.mcap`` (recorder_node, started first and
     stopped last; the sim holds its first state until the recorder subscribes to it). ``domain_id``: the
-    graph's DDS domain (None: a free one). Raises RuntimeError (with the sim's log tail) if the sim fails."""
+    graph's DDS domain (None: a free one). ``placement``: where nodes run, by executable (Graph; e.g. in
+    another network namespace). Raises RuntimeError (with the sim's log tail) if the sim fails."""
     from cpg_walker.robot.run_record import RunRecord
 
     if pacing not in PACINGS:
@@ -124,7 +126,7 @@ def run_graph(
     record_path.unlink(missing_ok=True)
     started = time.monotonic()
     more = node_params or {}
-    with Graph(work / f"{tag}_logs", domain_id=domain_id) as g:
+    with Graph(work / f"{tag}_logs", domain_id=domain_id, placement=placement) as g:
         if bag_dir is not None:
             start_recorder(g, bag_dir, timeout)
         g.start("pid_node", **{"lockstep": pacing == "lockstep", "wait_for_targets": target is not None,
