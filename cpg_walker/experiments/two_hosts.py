@@ -26,6 +26,12 @@ from cpg_walker.nodes.netns import Host, VethPair
 #: Discovery environment of a node on one side: automatic discovery on its subnet (inside the namespace:
 #: the veth's /30 and lo) and the other side's address as a static peer.
 DISCOVERY_RANGE = "SUBNET"
+#: Transports of a node on one side: UDP only. Two real hosts share no memory; the namespaces here share
+#: /dev/shm, and Fast DDS's shared-memory transport must not carry what is meant to cross the link.
+TRANSPORTS = "UDPv4"
+#: Hang guard of a walk (wall s): start-up, then this many wall s per sim s (lockstep ran at 0.1-0.4x
+#: real time with other jobs on the 2-core machine).
+START_S, WALL_PER_SIM_S = 180.0, 20.0
 #: The node executables on the controller side (namespace b); sim_node is on side a.
 CONTROLLERS = ("pid_node", "cpg_node")
 #: The keys of a walk report kept in the comparison.
@@ -34,7 +40,8 @@ KEPT = ("fell", "fall_time_s", "duration_s", "distance_m", "real_time_factor")
 
 def side_env(peer: Host) -> dict[str, str]:
     """A node's discovery settings with ``peer`` on the other end of the link."""
-    return {"ROS_AUTOMATIC_DISCOVERY_RANGE": DISCOVERY_RANGE, "ROS_STATIC_PEERS": peer.address}
+    return {"ROS_AUTOMATIC_DISCOVERY_RANGE": DISCOVERY_RANGE, "ROS_STATIC_PEERS": peer.address,
+            "FASTDDS_BUILTIN_TRANSPORTS": TRANSPORTS}
 
 
 def placement(a: Host, b: Host) -> dict[str, Placement]:
@@ -45,11 +52,17 @@ def placement(a: Host, b: Host) -> dict[str, Placement]:
     return place
 
 
+def hang_guard(duration: float) -> float:
+    """Wall s after which a walk of ``duration`` sim s is called hung."""
+    return START_S + WALL_PER_SIM_S * duration
+
+
 def run_two_hosts(out_dir: str | Path, duration: float = 30.0, timeout: float | None = None,
                   domain_id: int | None = None) -> dict:
     """The lockstep walk across a fresh veth pair; walk.json's report plus ``link``: the two sides and the
-    bytes that crossed it (counted on a's veth end)."""
+    bytes that crossed it (counted on a's veth end). ``timeout``: wall s (None: ``hang_guard``)."""
     out = Path(out_dir)
+    timeout = hang_guard(duration) if timeout is None else timeout
     with VethPair() as (a, b):
         rx0, tx0 = a.link_bytes()
         report = run_graph_walk(out, duration=duration, pacing="lockstep", timeout=timeout,
@@ -81,6 +94,7 @@ def compare(out_dir: str | Path, duration: float = 30.0, local: bool = True,
     """The walk on one host (unless ``local`` is False) and across the link; writes and returns
     ``two_hosts.json``: both summaries and the round trip's p50/p99 side by side."""
     out = Path(out_dir)
+    timeout = hang_guard(duration) if timeout is None else timeout
     runs = {}
     if local:
         runs["local"] = summary(run_graph_walk(out / "local", duration=duration, pacing="lockstep",
