@@ -2,10 +2,10 @@
 
 sim_node runs in network namespace a, pid_node and cpg_node in namespace b, joined by a veth pair
 (nodes/netns.py, created and removed here; root needed). Each namespace has only lo and its veth end, so
-every DDS packet between the two sides crosses the link, and discovery can reach nothing but the other
-address. Discovery (measured on this Fast DDS 2.14 PyPI build, docs/DEPLOYMENT.md): SUBNET range plus
-the other side as ROS_STATIC_PEERS connects; LOCALHOST plus static peers exchanged discovery packets over
-the veth but never matched a participant; OFF ignores static peers.
+every DDS packet between the two sides crosses the link (sim_node is UDP-only: the namespaces share
+/dev/shm, two hosts would not), and discovery can reach nothing but the other address. Discovery: the
+SUBNET range plus the other side as ROS_STATIC_PEERS, which connected every time on this Fast DDS 2.14
+PyPI build (LOCALHOST plus static peers did not, at first; OFF ignores static peers: docs/DEPLOYMENT.md).
 
 The walk is lockstep (sim_node waits for each period's torque, so other load on the machine slows it
 down but does not change it). ``compare`` runs the same walk on one host first, and reports the sim's
@@ -26,9 +26,10 @@ from cpg_walker.nodes.netns import Host, VethPair
 #: Discovery environment of a node on one side: automatic discovery on its subnet (inside the namespace:
 #: the veth's /30 and lo) and the other side's address as a static peer.
 DISCOVERY_RANGE = "SUBNET"
-#: Transports of a node on one side: UDP only. Two real hosts share no memory; the namespaces here share
-#: /dev/shm, and Fast DDS's shared-memory transport must not carry what is meant to cross the link.
-TRANSPORTS = "UDPv4"
+#: Transports of sim_node: UDP only. Two real hosts share no memory; the namespaces here share /dev/shm,
+#: and Fast DDS's shared-memory transport must not carry what is meant to cross the link. The controllers
+#: keep the default (shared memory between the two of them, UDP to the sim, which offers nothing else).
+SIM_TRANSPORTS = "UDPv4"
 #: Hang guard of a walk (wall s): start-up, then this many wall s per sim s (lockstep ran at 0.1-0.4x
 #: real time with other jobs on the 2-core machine).
 START_S, WALL_PER_SIM_S = 180.0, 20.0
@@ -40,13 +41,14 @@ KEPT = ("fell", "fall_time_s", "duration_s", "distance_m", "real_time_factor")
 
 def side_env(peer: Host) -> dict[str, str]:
     """A node's discovery settings with ``peer`` on the other end of the link."""
-    return {"ROS_AUTOMATIC_DISCOVERY_RANGE": DISCOVERY_RANGE, "ROS_STATIC_PEERS": peer.address,
-            "FASTDDS_BUILTIN_TRANSPORTS": TRANSPORTS}
+    return {"ROS_AUTOMATIC_DISCOVERY_RANGE": DISCOVERY_RANGE, "ROS_STATIC_PEERS": peer.address}
 
 
 def placement(a: Host, b: Host) -> dict[str, Placement]:
-    """sim_node on ``a``, the controllers on ``b``, each with the other as its discovery peer."""
-    place = {"sim_node": Placement(tuple(a.prefix()), side_env(b))}
+    """sim_node on ``a`` (UDP only), the controllers on ``b``, each with the other as its discovery
+    peer."""
+    place = {"sim_node": Placement(tuple(a.prefix()),
+                                   side_env(b) | {"FASTDDS_BUILTIN_TRANSPORTS": SIM_TRANSPORTS})}
     for node in CONTROLLERS:
         place[node] = Placement(tuple(b.prefix()), side_env(a))
     return place
@@ -72,6 +74,7 @@ def run_two_hosts(out_dir: str | Path, duration: float = 30.0, timeout: float | 
         "sim_side": {"netns": a.netns, "address": a.address, "nodes": ["sim_node"]},
         "controller_side": {"netns": b.netns, "address": b.address, "nodes": list(CONTROLLERS)},
         "discovery": side_env(b) | {"ROS_STATIC_PEERS": "the other side's address"},
+        "sim_transports": SIM_TRANSPORTS,
         "bytes_to_sim": rx1 - rx0, "bytes_from_sim": tx1 - tx0,
     }
     (out / "walk.json").write_text(json.dumps(report, indent=2) + "\n")
