@@ -178,6 +178,7 @@ def run_graph_walk(
     watchers: Sequence[Watcher] = (),
     foxglove: str | None = None,
     placement: dict[str, Placement] | None = None,
+    node_params: dict[str, dict] | None = None,
 ) -> dict:
     """Walk through sim_node + pid_node + cpg_node; write ``walk.json``; return its content. ``record``:
     every topic also to ``out_dir/recording.mcap`` (recorder_node; walk.json's ``bag``). ``zeta``,
@@ -186,7 +187,8 @@ def run_graph_walk(
     ``domain_id``: the graph's DDS domain (None: a free one). ``watchers`` are started on the graph's domain
     once its nodes are (e.g. a live status) and stopped when it has finished, however it ends.
     ``foxglove``: ``[HOST:]PORT`` ('' = 127.0.0.1:8765) of a Foxglove live view (foxglove_node) on the
-    graph; its URL is printed to stderr once it listens. ``placement``: where nodes run (run_graph)."""
+    graph; its URL is printed to stderr once it listens. ``placement``: where nodes run, ``node_params``: more
+    parameter overrides by node executable (both: run_graph)."""
     from cpg_walker.experiments.replay_graph import run_graph
     from cpg_walker.nodes.runtime import PACINGS
     from cpg_walker.walker.learning import load_controller
@@ -245,7 +247,8 @@ def run_graph_walk(
         run = run_graph(out, "cpg_node", cpg_params, duration=duration, pacing=pacing,
                         control_period=control_period, stop_on_fall=stop_on_fall, timeout=limit,
                         pid_params={"startup_wait": LEARN_WAIT_S} if learn_now else None, attach=attach,
-                        bag_dir=out if record else None, domain_id=domain_id, placement=placement)
+                        bag_dir=out if record else None, domain_id=domain_id, placement=placement,
+                        node_params=node_params)
     finally:
         for c in [*changes, *started]:
             c.stop()
