@@ -3,8 +3,7 @@ address (10.231.0.1/30 and 10.231.0.2/30 by default; they exist only inside the 
 once do not clash). Needs root and iproute2 (``ip netns``).
 
     with VethPair() as (a, b):
-        graph_a = Placement.on(a, peer=b)   # ip netns exec <a> ..., static peer b's address
-        ...
+        subprocess.run([*a.prefix(), "ip", "addr"])   # runs inside namespace a; b.address is the far end
 
 The namespaces are named ``cpgw-<pid>-<n>-a``/``-b`` after the creating process; entering a pair first
 deletes the pairs of processes that are gone (a crashed run), and leaving it always deletes its own
