@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpg_walker.nodes.graph import Graph
+from cpg_walker.nodes.graph import Graph, Placement
 from cpg_walker.nodes.recorder_node import NAME as RECORDER_NAME
 from cpg_walker.nodes.relay_node import consumer_remaps
 from cpg_walker.nodes.runtime import PACINGS
@@ -103,6 +103,7 @@ def run_graph(
     bag_dir: str | Path | None = None,
     domain_id: int | None = None,
     relay: dict | None = None,
+    placement: dict[str, Placement] | None = None,
 ) -> GraphRun:
     """Run sim_node + pid_node (+ ``target`` node with ``target_params``) for ``duration`` sim seconds.
     Each node gets its parameters file (config/<node>.yaml), then these arguments as overrides
@@ -117,8 +118,8 @@ def run_graph(
     stopped last; the sim holds its first state until the recorder subscribes to it). ``domain_id``: the
     graph's DDS domain (None: a free one). ``relay``: start relay_node (these parameter overrides of
     config/relay.yaml) before the others and route the consumers of its topics through it (remaps:
-    nodes/relay_node.py ``consumer_remaps``). Raises RuntimeError (with the sim's log tail) if the sim
-    fails."""
+    nodes/relay_node.py ``consumer_remaps``). ``placement``: where nodes run, by executable (Graph; e.g.
+    in another network namespace). Raises RuntimeError (with the sim's log tail) if the sim fails."""
     from cpg_walker.robot.run_record import RunRecord
 
     if pacing not in PACINGS:
@@ -129,7 +130,7 @@ def run_graph(
     record_path.unlink(missing_ok=True)
     started = time.monotonic()
     more = node_params or {}
-    with Graph(work / f"{tag}_logs", domain_id=domain_id) as g:
+    with Graph(work / f"{tag}_logs", domain_id=domain_id, placement=placement) as g:
         if bag_dir is not None:
             start_recorder(g, bag_dir, timeout)
         remaps: dict[str, dict[str, str]] = {}

@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Protocol
 
+from cpg_walker.nodes.graph import Placement
 from cpg_walker.nodes.recording import BAG_NAME
 from cpg_walker.walker.learning import cpg_defaults
 
@@ -177,6 +178,7 @@ def run_graph_walk(
     watchers: Sequence[Watcher] = (),
     foxglove: str | None = None,
     relay: dict | None = None,
+    placement: dict[str, Placement] | None = None,
     node_params: dict[str, dict] | None = None,
 ) -> dict:
     """Walk through sim_node + pid_node + cpg_node; write ``walk.json``; return its content. ``record``:
@@ -188,7 +190,8 @@ def run_graph_walk(
     ``foxglove``: ``[HOST:]PORT`` ('' = 127.0.0.1:8765) of a Foxglove live view (foxglove_node) on the
     graph; its URL is printed to stderr once it listens. ``relay``: a degraded link (relay_node with these
     overrides of config/relay.yaml) in front of the controllers (replay_graph.run_graph); walk.json's
-    ``relay`` holds its counters. ``node_params``: more overrides by node executable."""
+    ``relay`` holds its counters. ``placement``: where nodes run, ``node_params``: more parameter
+    overrides by node executable (both: run_graph)."""
     from cpg_walker.experiments.replay_graph import run_graph
     from cpg_walker.nodes.runtime import PACINGS
     from cpg_walker.walker.learning import load_controller
@@ -248,6 +251,7 @@ def run_graph_walk(
                         control_period=control_period, stop_on_fall=stop_on_fall, timeout=limit,
                         pid_params={"startup_wait": LEARN_WAIT_S} if learn_now else None, attach=attach,
                         bag_dir=out if record else None, domain_id=domain_id, relay=relay,
+                        placement=placement,
                         node_params=node_params)
     finally:
         for c in [*changes, *started]:

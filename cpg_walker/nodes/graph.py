@@ -7,7 +7,11 @@ files pass it) and overrides; stopped with SIGINT, then SIGKILL.
         g.start("pid_node", lockstep=True)
         g.wait("sim_node", timeout=60)
 
-Used by ``cpg-walker replay --graph``, ``cpg-walker walk``, the benchmark and the multi-process tests.
+A node can be placed elsewhere (``Placement``): its command line run under a prefix (e.g. ``ip netns exec
+NS``, nodes/netns.py) with environment overrides (e.g. its discovery peers).
+
+Used by ``cpg-walker replay --graph``, ``cpg-walker walk``, ``cpg-walker two-hosts``, the benchmark and
+the multi-process tests.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from cpg_walker.nodes.runtime import NODE_NAMES, params_file
@@ -100,6 +104,15 @@ def param_arg(name: str, value: object) -> str:
     return f"{name}:={fmt(value)}"
 
 
+@dataclass(frozen=True)
+class Placement:
+    """Where a node process runs: ``prefix`` before its command line (e.g. ``ip netns exec NS``) and
+    ``env`` over the graph's environment (e.g. ROS_STATIC_PEERS)."""
+
+    prefix: tuple[str, ...] = ()
+    env: Mapping[str, str] = field(default_factory=dict)
+
+
 @dataclass
 class NodeProcess:
     name: str
@@ -126,12 +139,15 @@ class NodeProcess:
 class Graph:
     """A set of node processes on one isolated domain; a context manager that always stops them."""
 
-    def __init__(self, log_dir: str | Path, domain_id: int | None = None, use_sim_time: bool = True):
+    def __init__(self, log_dir: str | Path, domain_id: int | None = None, use_sim_time: bool = True,
+                 placement: Mapping[str, Placement] | None = None):
+        """``placement``: by node executable, where it runs (default: here, with the graph's env)."""
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.domain_id = quiet_domain_id() if domain_id is None else int(domain_id)
         self.env = isolated_env(self.domain_id)
         self.use_sim_time = use_sim_time
+        self.placement = dict(placement or {})
         self.procs: dict[str, NodeProcess] = {}
 
     def command(self, node: str, params: dict, remaps: Mapping[str, str] | None = None) -> list[str]:
@@ -149,10 +165,13 @@ class Graph:
 
     def start(self, node: str, remaps: Mapping[str, str] | None = None, **params: object) -> NodeProcess:
         """Start ``node`` with its parameters file and ``params`` overriding it (``push__force=[..]`` for
-        ``push.force``); ``remaps``: topic names the node uses -> the ones it gets (``-r from:=to``)."""
+        ``push.force``); ``remaps``: topic names the node uses -> the ones it gets (``-r from:=to``); it
+        runs where its placement says."""
+        place = self.placement.get(node, Placement())
         log_path = self.log_dir / f"{node}.log"
         with open(log_path, "wb") as log:
-            popen = subprocess.Popen(self.command(node, params, remaps), env=self.env, stdout=log,
+            popen = subprocess.Popen([*place.prefix, *self.command(node, params, remaps)],
+                                     env={**self.env, **place.env}, stdout=log,
                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                      start_new_session=True)
         proc = NodeProcess(node, popen, log_path, time.monotonic())
