@@ -13,6 +13,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--minutes", type=float, default=10.0, help="sim minutes to walk (default 10)")
     p.add_argument("--period", type=float, default=20.0, metavar="S",
                    help="sim s between changes (default 20)")
+    p.add_argument("--pacing", choices=("realtime", "lockstep"), default="realtime",
+                   help="the sim's pacing (default realtime; lockstep: the same run whatever the load)")
     p.set_defaults(func=_run)
 
 
@@ -22,7 +24,7 @@ def _run(args: argparse.Namespace) -> int:
 
     from cpg_walker.experiments.soak import markdown, run_soak
 
-    report = run_soak(args.out, minutes=args.minutes, period=args.period,
+    report = run_soak(args.out, minutes=args.minutes, period=args.period, pacing=args.pacing,
                       say=lambda text: print(f"soak: {text}", file=sys.stderr, flush=True))
     table = markdown(report)
     (Path(args.out) / "soak.md").write_text(table)

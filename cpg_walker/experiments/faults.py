@@ -87,12 +87,13 @@ class FaultGraph:
     A context manager that stops every process it started."""
 
     def __init__(self, out_dir: str | Path, zeta: float = 1.0, domain_id: int | None = None,
-                 say=None):
+                 say=None, pacing: str = "realtime"):
         from cpg_walker.nodes.graph import Graph
 
         self.out = Path(out_dir)
         self.graph = Graph(self.out / "logs", domain_id=domain_id)
         self.zeta = float(zeta)
+        self.pacing = pacing
         self.odom = Odometry()
         self.say = say or (lambda text: print(f"faults: {text}", file=sys.stderr, flush=True))
         self.restarts: dict[str, int] = {}
@@ -100,11 +101,12 @@ class FaultGraph:
 
     # -------------------------------------------------------------- processes
     def params(self, node: str) -> dict:
+        lockstep = self.pacing == "lockstep"
         if node == "sim_node":
-            return {"pacing": "realtime", "duration": 0.0, "stop_on_fall": False}
+            return {"pacing": self.pacing, "duration": 0.0, "stop_on_fall": False}
         if node == "pid_node":
-            return {"wait_for_targets": True}
-        return {"zeta": self.zeta}
+            return {"wait_for_targets": True, "lockstep": lockstep}
+        return {"zeta": self.zeta, "lockstep": lockstep}
 
     def start(self) -> None:
         """pid_node and cpg_node, then the sim (realtime) once cpg_node is up, as users start the graph."""

@@ -1,9 +1,9 @@
 """Soak: the graph walking for minutes of sim time with a change every ``period`` s (``cpg-walker soak``).
 
-sim_node (realtime pacing), pid_node and cpg_node as processes (experiments/faults.py's FaultGraph); every
-``period`` sim s the next change of PLAN: zeta/alpha through /cpg/set_parameters, or a /cmd_vel
-(10 Hz for the window; after a ``stop`` the node's timeout makes the robot stand, and the next parameter
-change, which holds until the next Twist, walks it on). Per window: the change, the speed over the
+sim_node (realtime pacing, or lockstep), pid_node and cpg_node as processes (experiments/faults.py's
+FaultGraph); every ``period`` sim s the next change of PLAN: zeta/alpha through /cpg/set_parameters, or
+a /cmd_vel (10 Hz for the window; after a ``stop`` the node's timeout makes the robot stand, and the next
+parameter change, which holds until the next Twist, walks it on). Per window: the change, the speed over the
 window (/odom/ground_truth), each node's resident memory (VmRSS from /proc), the sim's late commands and
 cpg_node's overruns (their /diagnostics counters); at the end whether the robot fell, memory from the
 first window to the last and the overruns' rate in the first and last third.
@@ -71,8 +71,10 @@ def _trend(series: list[float]) -> dict:
             "per_window_last_third": round(sum(last) / len(last), 2) if last else None}
 
 
-def run_soak(out_dir: str | Path, minutes: float = 10.0, period: float = 20.0, say=print) -> dict:
-    """Walk ``minutes`` of sim time with a change every ``period`` s; write DIR/soak.json; return it."""
+def run_soak(out_dir: str | Path, minutes: float = 10.0, period: float = 20.0, pacing: str = "realtime",
+             say=print) -> dict:
+    """Walk ``minutes`` of sim time with a change every ``period`` s (the sim's ``pacing``); write
+    DIR/soak.json; return it."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
@@ -87,7 +89,7 @@ def run_soak(out_dir: str | Path, minutes: float = 10.0, period: float = 20.0, s
     n_windows = max(1, round(minutes * 60.0 / period))
     windows: list[dict] = []
     wall0 = time.monotonic()
-    with FaultGraph(out, zeta=1.0, say=say) as g:
+    with FaultGraph(out, zeta=1.0, say=say, pacing=pacing) as g:
         g.start()
         node = g._node
         counters = Counters()
@@ -141,7 +143,8 @@ def run_soak(out_dir: str | Path, minutes: float = 10.0, period: float = 20.0, s
         fell_at = g.odom.fell_at
     first, last = windows[0], windows[-1]
     report = {
-        "minutes": minutes, "period_s": period, "windows_run": len(windows), "fell": fell_at is not None,
+        "minutes": minutes, "period_s": period, "pacing": pacing, "windows_run": len(windows),
+        "fell": fell_at is not None,
         "fell_at_s": fell_at, "wall_s": round(time.monotonic() - wall0, 1),
         "rss_mib": {n: {"first_window": first["rss_mib"][n], "last_window": last["rss_mib"][n],
                         "max": max((w["rss_mib"][n] or 0.0) for w in windows)} for n in NODES},
