@@ -232,7 +232,7 @@ def plot(report: dict, path: Path) -> None:
     for ax in axes:
         ax.axhline(report["duration_s"], color="grey", lw=0.8, ls="--")
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, loc="lower left")
+    axes[0].legend(fontsize=8, loc="center right")
     fig.suptitle(f"Degraded transport: {report['duration_s']:g} s realtime walks through relay_node "
                  f"({report['date_utc']} UTC)")
     fig.tight_layout()
