@@ -25,13 +25,11 @@ def _fmt(value: float, unit: str) -> str:
     return f"{value:.{digits}f}{unit}"
 
 
-def _ratio(value: float, base: float, lower_is_better: bool) -> str:
-    """How the figure compares with its baseline, in words."""
-    if lower_is_better:
-        r = base / value
-        return f"{r:.2f}× faster" if r >= 1 else f"{1 / r:.2f}× the cost"
-    r = value / base
-    return f"{r:.2f}× faster" if r >= 1 else f"{r:.2f}×"
+def _ratio(value: float, base: float, lower_is_better: bool, better: str = "faster",
+           worse: str = "slower") -> str:
+    """How the figure compares with its baseline, in words: "r× faster" / "r× slower" (r >= 1)."""
+    r = base / value if lower_is_better else value / base
+    return f"{r:.2f}× {better}" if r >= 1 else f"{1 / r:.2f}× {worse}"
 
 
 def _rows(results: dict) -> list[tuple[str, str, str, str]]:
@@ -39,10 +37,10 @@ def _rows(results: dict) -> list[tuple[str, str, str, str]]:
     rows: list[tuple[str, str, str, str]] = []
 
     def add(figure: str, value, unit: str, base_name: str, base, lower_is_better: bool,
-            ratio: str | None = None) -> None:
+            words: tuple[str, str] = ("faster", "slower")) -> None:
         if value is None or base is None:
             return
-        ratio = ratio if ratio is not None else _ratio(value, base, lower_is_better)
+        ratio = _ratio(value, base, lower_is_better, *words)
         rows.append((figure, _fmt(value, unit), f"{base_name}: {_fmt(base, unit)}", ratio))
 
     c = "cpg.humanoid_10x3"
@@ -58,9 +56,11 @@ def _rows(results: dict) -> list[tuple[str, str, str, str]]:
         get(results, "humanoid.learn_n3.teaching_seconds_per_wall_second"), "×", "solve_ivp RK45 10×3",
         get(results, f"{c}.solve_ivp_rk45_sim_s_per_wall_s"), False)
     add("humanoid controller tick (N = 3: step + joint targets)", get(results, "humanoid.n3.step_us"), " µs",
-        "bare 10×3 network step", get(results, "humanoid.n3.bare_network_step_us"), True)
+        "bare 10×3 network step", get(results, "humanoid.n3.bare_network_step_us"), True,
+        ("cheaper", "the cost"))
     add("physics step (HOAP-2 standing, `Hoap2Sim.step`)", get(results, "robot.physics_step_us"), " µs",
-        "bare `mj_step`", get(results, "robot.bare_mj_step_us"), True)
+        "bare `mj_step`", get(results, "robot.bare_mj_step_us"), True,
+        ("cheaper", "the cost"))
     dt, step = get(results, "robot.physics_timestep_s"), get(results, "robot.physics_step_us")
     if dt is not None and step:
         add("in-process replay (physics + PID), × real time", get(results, "robot.replay_real_time_factor"),
@@ -70,31 +70,34 @@ def _rows(results: dict) -> list[tuple[str, str, str, str]]:
         add("in-process CPG walk loop, × real time", get(results, "loop.cpg_walk_20s.real_time_factor"), "×",
             "its time in `mj_step` alone", get(results, "loop.cpg_walk_20s.sim_s") / mj_s, False)
     base_rtf = get(results, "graph.baseline_inprocess.real_time_factor")
-    for key, name in (("realtime", "real time"), ("fast", "fast"), ("lockstep", "lockstep"),
-                      ("lockstep_cpg_walk", "lockstep, 3-node CPG walk")):
-        add(f"ROS graph ({name} pacing), × real time", get(results, f"graph.{key}.real_time_factor"), "×",
+    for key, name in (("realtime", "sim + PID, real-time pacing"), ("fast", "sim + PID, fast pacing"),
+                      ("lockstep", "sim + PID, lockstep"),
+                      ("lockstep_cpg_walk", "3-node CPG walk, lockstep")):
+        add(f"ROS graph {name}, × real time", get(results, f"graph.{key}.real_time_factor"), "×",
             "sim + PID in one process", base_rtf, False)
     for q in ("p50", "p99"):
         add(f"/joint_states → torque latency {q} (lockstep)",
             get(results, f"graph.lockstep.latency_ms.{q}_ms"), " ms", "echo round trip (HotPath)",
-            get(results, f"graph.pingpong_baseline.hotpath.{q}_ms"), True)
+            get(results, f"graph.pingpong_baseline.hotpath.{q}_ms"), True, ("shorter", "longer"))
         add(f"echo round trip {q}, HotPath poll", get(results, f"graph.pingpong_baseline.hotpath.{q}_ms"),
-            " ms", "rclpy executor", get(results, f"graph.pingpong_baseline.executor.{q}_ms"), True)
+            " ms", "rclpy executor", get(results, f"graph.pingpong_baseline.executor.{q}_ms"), True,
+            ("shorter", "longer"))
     run = get(results, "graph.lockstep")
     base_cpu = get(results, "graph.baseline_inprocess.cpu_s_per_sim_s")
     if run and base_cpu:
         fractions = {k: v for k, v in run["cpu_core_fraction"].items() if v is not None}
         for node, frac in fractions.items():  # CPU s per sim s = core fraction / real-time factor
             add(f"CPU per sim s, {node} (lockstep)", frac / run["real_time_factor"], " s",
-                "sim + PID in one process", base_cpu, True)
+                "sim + PID in one process", base_cpu, True, ("less", "more"))
         add("CPU per sim s, all nodes (lockstep)", sum(fractions.values()) / run["real_time_factor"], " s",
-            "sim + PID in one process", base_cpu, True)
+            "sim + PID in one process", base_cpu, True, ("less", "more"))
     cpg_cpu = get(results, "graph.realtime_cpg_walk.cpu_core_fraction.cpg_node")
     tick = get(results, "humanoid.n3.step_us")
     period = get(results, "graph.setup.control_period_s")
-    if cpg_cpu is not None and tick and period:
-        add("CPU per sim s, cpg_node (real time)", cpg_cpu, " s", "controller ticks in-process",
-            tick * 1e-6 / period, True)
+    rtf = get(results, "graph.realtime_cpg_walk.real_time_factor")
+    if cpg_cpu is not None and tick and period and rtf:
+        add("CPU per sim s, cpg_node (real time)", cpg_cpu / rtf, " s", "controller ticks in-process",
+            tick * 1e-6 / period, True, ("less", "more"))
     return rows
 
 
