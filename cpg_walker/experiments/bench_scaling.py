@@ -172,11 +172,18 @@ def _graphs(counts: tuple[int, ...], parallel_counts: tuple[int, ...], duration:
     timed: the serial wall for R is that of the first R), then R at once for each R in ``parallel_counts``."""
     from cpg_walker.experiments.replay_graph import run_graph
 
+    errors: list[str] = []
+
     def one(k: int, domain: int, mode: str) -> tuple[float, float]:
         t0 = time.perf_counter()
-        run = run_graph(work, "cpg_node", duration=duration, pacing="lockstep", timeout=120 + 30 * duration,
-                        tag=f"{mode}_{k}", domain_id=domain)
-        return time.perf_counter() - t0, float(run.record.stats["real_time_factor"])
+        try:
+            run = run_graph(work, "cpg_node", duration=duration, pacing="lockstep",
+                            timeout=120 + 30 * duration, tag=f"{mode}_{k}", domain_id=domain)
+            rtf = float(run.record.stats["real_time_factor"])
+        except Exception as exc:  # a failed run is reported (its wall time still counts), not fatal
+            errors.append(f"{mode}_{k}: {type(exc).__name__}: {str(exc)[:200]}")
+            rtf = float("nan")
+        return time.perf_counter() - t0, rtf
 
     domains = _distinct_domains(max(counts))
     serial = []
@@ -195,6 +202,7 @@ def _graphs(counts: tuple[int, ...], parallel_counts: tuple[int, ...], duration:
                        "speedup": serial_s / parallel_s,
                        "sim_rtf_serial_median": float(np.median([r for _, r in serial[:R]])),
                        "sim_rtf_parallel_median": float(np.median([r for _, r in runs]))}
+    out["errors"] = errors
     return out
 
 
