@@ -16,10 +16,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true", help="fewer repetitions (for smoke tests)")
     p.add_argument("--readme", default=None, metavar="FILE",
                    help="also write the summary tables into FILE's generated benchmark block (README.md)")
+    p.add_argument("--from-json", default=None, metavar="BENCH_JSON",
+                   help="run nothing: regenerate the tables and plots (and --readme) from this bench.json")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.from_json:
+        import json
+        from pathlib import Path
+
+        from cpg_walker.experiments.bench_report import write
+
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        write(json.loads(Path(args.from_json).read_text()), out, args.readme)
+        return 0
     from cpg_walker.experiments.bench import run_benchmarks
 
     run_benchmarks(args.out, only=args.only, quick=args.quick, readme=args.readme)

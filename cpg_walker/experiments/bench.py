@@ -91,11 +91,7 @@ def run_benchmarks(out_dir: str | Path, only: list[str] | None = None, quick: bo
     (out / "bench.json").write_text(json.dumps(results, indent=2) + "\n")
     md = ["# cpg_walker benchmarks", "", "| figure | value |", "|---|---|", *_to_markdown(results), ""]
     (out / "bench.md").write_text("\n".join(md))
-    summary = bench_report.table(results)
-    (out / "bench_table.md").write_text("\n".join(summary) + "\n")
-    pngs = bench_report.plots(results, out)
-    if readme is not None:
-        bench_report.update_readme(readme, summary)
-    print(f"bench: wrote bench.json, bench.md, bench_table.md{''.join(', ' + p.name for p in pngs)} in {out}"
+    files = bench_report.write(results, out, readme)
+    print(f"bench: wrote bench.json, bench.md{''.join(', ' + p.name for p in files)} in {out}"
           + (f"; updated {readme}" if readme is not None else ""), file=sys.stderr)
     return results
