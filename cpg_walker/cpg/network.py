@@ -721,3 +721,41 @@ class CPGNetwork:
         if np.max(np.abs(al - self._alpha_target)) <= 1e-12 * (1.0 + np.max(np.abs(self._alpha_target))):
             al[...] = self._alpha_target
             self._alpha_relaxing = False
+
+
+def stack_networks(nets: list[CPGNetwork]) -> CPGNetwork:
+    """One network holding ``nets`` side by side (B = ΣB_k CPGs, e.g. R robots' controllers), so that one
+    `step` advances them all: each keeps its own state, coefficients, coupling links (re-indexed into
+    the stack), ζ/α modulation and non-harmonic flags; the equations are per oscillator, so stepping the
+    stack equals stepping each network (test_cpg_stack.py). All must share N, params and learning state
+    (frozen or learning); the stack uses the first one's backend. Returns a new network (no views)."""
+    if not nets:
+        raise ValueError("stack_networks needs at least one network")
+    first = nets[0]
+    for net in nets[1:]:
+        if net.N != first.N or net.params != first.params or net.learning != first.learning:
+            raise ValueError("stacked networks must share N, params and learning state")
+
+    def cat(get) -> np.ndarray:
+        return np.concatenate([np.asarray(get(n)) for n in nets])
+
+    s = cat(lambda n: n.state.transpose(1, 0, 2))  # (ΣB, 5, N)
+    out = CPGNetwork(s[:, 2], first.params, x0=s[:, 0], y0=s[:, 1], alpha0=s[:, 3], phi0=s[:, 4],
+                     time_scale=cat(lambda n: n.time_scale), offset=cat(lambda n: n.offset),
+                     gain=cat(lambda n: n.gain), backend=first.backend,
+                     nonharmonic=cat(lambda n: n.nonharmonic))
+    base = np.cumsum([0] + [n.B * n.N for n in nets[:-1]])
+    out._ref = np.concatenate([n._ref + b for n, b in zip(nets, base, strict=True)])
+    out._ref_omega = np.concatenate([n._ref_omega + b for n, b in zip(nets, base, strict=True)])
+    out._k = cat(lambda n: n._k)
+    out._learn_phi = cat(lambda n: n._learn_phi)
+    out.t = first.t
+    if not first.learning:
+        out.freeze()
+        out._alpha_learned = cat(lambda n: n._alpha_learned)
+        out._zeta = cat(lambda n: n._zeta)
+        out._amp = cat(lambda n: n._amp)
+        out._alpha_target = cat(lambda n: n._alpha_target)
+        out._alpha_relaxing = any(n._alpha_relaxing for n in nets)
+        out._prepare_playback()
+    return out

@@ -22,7 +22,17 @@ SECTIONS: dict[str, str] = {
     "loop": "cpg_walker.experiments.bench_loop:run",
     "graph": "cpg_walker.experiments.bench_graph:run",
     "realtime": "cpg_walker.experiments.bench_realtime:run",
+    "oscillators": "cpg_walker.experiments.bench_scaling:run_oscillators",
+    "robots": "cpg_walker.experiments.bench_scaling:run_robots",
 }
+
+
+def _load() -> dict:
+    """The machine's load averages (other processes share it: absolute timings are noisy)."""
+    import os
+
+    one, five, fifteen = os.getloadavg()
+    return {"1min": round(one, 2), "5min": round(five, 2), "15min": round(fifteen, 2)}
 
 
 def _machine() -> dict:
@@ -36,6 +46,7 @@ def _machine() -> dict:
         "platform": platform.platform(),
         "cpus": os.cpu_count(),
         "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "load_start": _load(),
     }
 
 
@@ -52,13 +63,20 @@ def _to_markdown(results: dict, prefix: str = "") -> list[str]:
     return lines
 
 
-def run_benchmarks(out_dir: str | Path, only: list[str] | None = None, quick: bool = False) -> dict:
+def run_benchmarks(out_dir: str | Path, only: list[str] | None = None, quick: bool = False,
+                   readme: str | Path | None = None) -> dict:
+    """Run the sections (``only``: these), write bench.json, bench.md (every figure), bench_table.md (the
+    summary tables, experiments/bench_report.py) and the scaling plots into ``out_dir``; with ``readme``,
+    replace that file's generated benchmark block by the summary tables too."""
+    from cpg_walker.experiments import bench_report
+
     unknown = sorted(set(only or []) - set(SECTIONS))
     if unknown:
         raise ValueError(f"unknown benchmark section(s) {unknown}; known: {sorted(SECTIONS)}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     results: dict = {"machine": _machine(), "quick": quick}
+    t_start = time.perf_counter()
     for name, target in SECTIONS.items():
         if only and name not in only:
             continue
@@ -67,8 +85,13 @@ def run_benchmarks(out_dir: str | Path, only: list[str] | None = None, quick: bo
         started = time.perf_counter()
         results[name] = getattr(importlib.import_module(module_name), func_name)(quick=quick)
         results[name]["section_wall_s"] = round(time.perf_counter() - started, 2)
+        print(f"bench: {name} done in {results[name]['section_wall_s']:.0f} s", file=sys.stderr, flush=True)
+    results["machine"]["load_end"] = _load()
+    results["machine"]["wall_s"] = round(time.perf_counter() - t_start, 1)
     (out / "bench.json").write_text(json.dumps(results, indent=2) + "\n")
     md = ["# cpg_walker benchmarks", "", "| figure | value |", "|---|---|", *_to_markdown(results), ""]
     (out / "bench.md").write_text("\n".join(md))
-    print(f"bench: wrote {out / 'bench.json'} and {out / 'bench.md'}", file=sys.stderr)
+    files = bench_report.write(results, out, readme)
+    print(f"bench: wrote bench.json, bench.md{''.join(', ' + p.name for p in files)} in {out}"
+          + (f"; updated {readme}" if readme is not None else ""), file=sys.stderr)
     return results

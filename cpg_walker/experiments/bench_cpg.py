@@ -54,13 +54,16 @@ def _signals(B: int, w0: float):
     return signal
 
 
-def _case(shape: tuple[int, int], w_base: float, dt_learn: float, span: float, quick: bool) -> dict:
+def case(shape: tuple[int, int], w_base: float, dt_learn: float, span: float, quick: bool,
+         reps_n: tuple[int, int] | None = None) -> dict:
+    """One network shape (B, N): step costs of each backend (median of ``reps_n`` = (repeats, steps);
+    None: by ``quick``), learning over ``span`` s vs solve_ivp."""
     from scipy.integrate import solve_ivp
 
     B, N = shape
     P = _signals(B, w_base)
     w0 = np.tile(w_base * np.arange(1, N + 1) * 0.97, (B, 1))
-    reps, n = (3, 300) if quick else (7, 2000)
+    reps, n = reps_n or ((3, 300) if quick else (7, 2000))
     teach = P(np.array([0.0, dt_learn / 2, dt_learn]))
     learn_us = _median_step_us({b: CPGNetwork(w0, backend=b) for b in BACKENDS}, dt_learn, teach, n, reps)
     frozen = {b: CPGNetwork(w0, backend=b) for b in BACKENDS}
@@ -110,8 +113,8 @@ def _case(shape: tuple[int, int], w_base: float, dt_learn: float, span: float, q
 
 def run(quick: bool = False) -> dict:
     return {
-        "fig2_1x4": _case((1, 4), 15.0, 0.004, 4.0 if quick else 20.0, quick),
-        "humanoid_10x3": _case((10, 3), 2.5, 0.01, 10.0 if quick else 60.0, quick),
+        "fig2_1x4": case((1, 4), 15.0, 0.004, 4.0 if quick else 20.0, quick),
+        "humanoid_10x3": case((10, 3), 2.5, 0.01, 10.0 if quick else 60.0, quick),
         "integrator": "fixed-step RK4, backends: numpy (in-place buffers) and numba (compiled whole-step "
         "kernels, cpg/kernels.py); baseline solve_ivp RK45 rtol=1e-6 atol=1e-9",
         "backends": list(BACKENDS),

@@ -12,7 +12,9 @@ Measures, each in its own isolated DDS domain with real node processes:
   * CPU per node over its active period (fraction of one core);
   * the real-time graph's topics as a third process receives them: messages per wall second and the share
     of states whose answering torque arrived too (the tests check rates in sim time only).
-Baselines measured in the same run: the same sim + PID law in one process without ROS (real-time factor),
+Baselines measured in the same run: the same sim + PID law in one process without ROS (real-time factor,
+CPU per sim second), the round trip of a /joint_states-sized message to an echo process and back (the
+latency's transport floor, `pingpong_latency`, with rclpy's executor and with the nodes' HotPath poll),
 and the per-period costs inside the sim process (state publishing, physics step, an idle rclpy
 executor ``spin_once`` versus the direct wait-set poll the nodes use).
 """
@@ -75,12 +77,13 @@ def inprocess_baseline(duration: float) -> dict:
     period = control_period()
     steps = round(period / sim.dt)
     n = round(duration / period)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for _ in range(n):
         tau = pid.step(target, zero, sim.joint_positions(), sim.joint_velocities(), period)
         sim.step(tau, steps)
-    wall = time.perf_counter() - t0
-    return {"real_time_factor": round(duration / wall, 2), "per_period_us": round(wall / n * 1e6, 1)}
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {"real_time_factor": round(duration / wall, 2), "per_period_us": round(wall / n * 1e6, 1),
+            "cpu_s_per_sim_s": round(cpu / duration, 4)}
 
 
 def per_period_costs(n: int = 1000) -> dict:
@@ -124,6 +127,110 @@ def per_period_costs(n: int = 1000) -> dict:
     node.destroy_node()
     rclpy.try_shutdown()
     return out
+
+
+#: How `pingpong_latency`'s two processes take messages: rclpy's executor, or nodes.runtime.HotPath (the
+#: direct wait-set poll sim_node and pid_node use).
+PING_MODES = ("executor", "hotpath")
+
+
+def pingpong_latency(mode: str = "hotpath", n: int = 500, period: float = 0.002,
+                     start_timeout: float = 60.0) -> dict:
+    """Baseline of the state->torque latency: the round trip of a /joint_states-sized JointState (25
+    joints) from this process to a minimal echo process (``python -m cpg_walker.experiments.bench_graph
+    echo MODE``) and back, in its own domain, ``n`` samples one every ``period`` s: the transport alone
+    (no physics, no PID), both sides taking messages the ``mode`` way (PING_MODES)."""
+    import os
+    import subprocess
+    import sys
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from sensor_msgs.msg import JointState
+
+    from cpg_walker.experiments.replay_graph import stop_process
+    from cpg_walker.nodes.graph import isolated_env, quiet_domain_id
+    from cpg_walker.nodes.messages import stamp, stamp_ns
+    from cpg_walker.robot.joints import JOINT_NAMES
+
+    domain = quiet_domain_id()
+    from cpg_walker.nodes.runtime import HotPath
+
+    if mode not in PING_MODES:
+        raise ValueError(f"mode must be one of {PING_MODES}, got {mode!r}")
+    echo = subprocess.Popen([sys.executable, "-m", "cpg_walker.experiments.bench_graph", "echo", mode],
+                            env=isolated_env(domain), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node("bench_ping", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    back: dict[int, int] = {}
+    try:
+        pub = node.create_publisher(JointState, "/ping", 10)
+        def answered(m: JointState) -> None:
+            back.setdefault(stamp_ns(m), time.monotonic_ns())
+
+        sub = node.create_subscription(JointState, "/pong", answered, 10)
+        hot = HotPath(node, [sub])
+
+        def wait(timeout: float) -> None:
+            if mode == "hotpath":
+                hot.poll(timeout)
+            else:
+                ex.spin_once(timeout_sec=timeout)
+        msg = JointState(name=list(JOINT_NAMES), position=[0.1] * 25, velocity=[0.2] * 25, effort=[0.3] * 25)
+        end = time.monotonic() + start_timeout
+        while not back:  # until the echo answers (discovery done both ways)
+            if time.monotonic() > end or echo.poll() is not None:
+                raise RuntimeError("the echo process did not answer")
+            msg.header.stamp = stamp(time.monotonic_ns())
+            pub.publish(msg)
+            wait(0.05)
+        rtt, lost = [], 0
+        for _ in range(n):
+            sent = time.monotonic_ns()
+            msg.header.stamp = stamp(sent)
+            pub.publish(msg)
+            deadline = time.monotonic() + 0.1
+            while sent not in back and time.monotonic() < deadline:
+                wait(0.001)
+            if sent in back:
+                rtt.append((back[sent] - sent) * 1e-6)
+            else:
+                lost += 1
+            time.sleep(max(0.0, period - (time.monotonic_ns() - sent) * 1e-9))
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+        stop_process(echo)
+    return {"samples": len(rtt), "lost": lost, "p50_ms": round(float(np.percentile(rtt, 50)), 3),
+            "p99_ms": round(float(np.percentile(rtt, 99)), 3), "max_ms": round(float(np.max(rtt)), 3)}
+
+
+def _echo(mode: str) -> int:
+    """The echo process of `pingpong_latency`: /ping back out on /pong, taken the ``mode`` way."""
+    import rclpy
+    from sensor_msgs.msg import JointState
+
+    from cpg_walker.nodes.runtime import HotPath, spin_hot
+
+    rclpy.init()
+    node = rclpy.create_node("bench_echo")
+    pub = node.create_publisher(JointState, "/pong", 10)
+    sub = node.create_subscription(JointState, "/ping", pub.publish, 10)
+    try:
+        if mode == "hotpath":
+            spin_hot(node, HotPath(node, [sub]))
+        else:
+            rclpy.spin(node)
+    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
+        pass
+    return 0
 
 
 def third_process_rates(window: float = 2.0, start_timeout: float = 120.0) -> dict:
@@ -190,6 +297,7 @@ def run(quick: bool = False) -> dict:
                   "note": "sim_node + pid_node standing unless stated; each run in its own DDS domain"},
         "baseline_inprocess": inprocess_baseline(d),
         "per_period_costs": per_period_costs(300 if quick else 1000),
+        "pingpong_baseline": {mode: pingpong_latency(mode, 300 if quick else 1000) for mode in PING_MODES},
     }
     for pacing in PACINGS:
         result[pacing] = graph_run(pacing, d, work=work)
@@ -219,4 +327,6 @@ def run(quick: bool = False) -> dict:
 if __name__ == "__main__":
     import sys
 
+    if sys.argv[1:2] == ["echo"]:
+        sys.exit(_echo(sys.argv[2]))
     print(json.dumps(run(quick="--quick" in sys.argv), indent=2))

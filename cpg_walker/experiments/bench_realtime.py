@@ -252,7 +252,7 @@ def _cpg_target_cpu(cpu) -> float:
 
 def run(quick: bool = False) -> dict:
     duration = 10.0 if quick else 30.0
-    repeats = 1 if quick else 2
+    repeats = 1  # full: one 30 s run per scenario (two made the benchmark run ~10 min longer)
     names = QUICK_SCENARIOS if quick else tuple(n for n, _, _ in SCENARIOS)
     work = Path(tempfile.mkdtemp(prefix="bench_realtime_"))
     result: dict = {

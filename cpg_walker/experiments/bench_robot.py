@@ -1,5 +1,6 @@
 """Benchmark section "robot": physics step cost of the HOAP-2 model and the in-process replay's
-real-time factor (PID torque law at the configured rate, no rendering)."""
+real-time factor (PID torque law at the configured rate, no rendering). Baseline: a bare
+``mujoco.mj_step`` loop on the same model (what Hoap2Sim.step adds: applying the torques, the loop)."""
 
 from __future__ import annotations
 
@@ -24,11 +25,27 @@ def _step_cost_us(sim: Hoap2Sim, steps: int) -> float:
     return (time.perf_counter() - started) / steps * 1e6
 
 
+def _mj_step_cost_us(sim: Hoap2Sim, steps: int) -> float:
+    """Baseline: bare ``mujoco.mj_step`` on the same model and data, from the same standing state with the
+    same torques held."""
+    import mujoco
+
+    sim.reset()
+    posture = sim.joint_positions()
+    sim.step(PidLaw.from_config().step(posture, np.zeros(25), posture, np.zeros(25), sim.dt), 0)
+    started = time.perf_counter()
+    for _ in range(steps):
+        mujoco.mj_step(sim.model, sim.data)
+    return (time.perf_counter() - started) / steps * 1e6
+
+
 def run(quick: bool = False) -> dict:
     sim = Hoap2Sim()
     repeats = 3 if quick else 7
     steps = 1000 if quick else 5000
-    step_us = statistics.median(_step_cost_us(sim, steps) for _ in range(repeats))
+    pairs = [(_step_cost_us(sim, steps), _mj_step_cost_us(sim, steps)) for _ in range(repeats)]  # interleaved
+    step_us = statistics.median(p[0] for p in pairs)
+    mj_us = statistics.median(p[1] for p in pairs)
     duration = 5.0 if quick else 30.0
     rtf = []
     for _ in range(1 if quick else 3):
@@ -41,6 +58,7 @@ def run(quick: bool = False) -> dict:
     return {
         "physics_timestep_s": sim.dt,
         "physics_step_us": round(step_us, 2),
+        "bare_mj_step_us": round(mj_us, 2),
         "replay_sim_s": duration,
         "replay_real_time_factor": round(statistics.median(rtf), 1),
         "replay_fell": bool(result.fell),
