@@ -360,7 +360,7 @@ class CPGNode(Node):
         self.recent: dict[int, tuple] = {}  # last published targets by stamp (re-sent ticks)
         self.builder = JointStateBuilder(self.source.names, fields=("position", "velocity"))
         self.next_horizon_ns = 0
-        self.horizon_work: list[float] = []
+        self.horizon_work: deque[float] = deque(maxlen=10_000)  # wall s per horizon (the newest: flat memory)
         self.traj_builder: JointTrajectoryBuilder | None = None
         self.traj_offsets_ns: np.ndarray | None = None
         self.traj_period_ns: int | None = None

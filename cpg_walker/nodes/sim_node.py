@@ -13,6 +13,7 @@ docs/ROS_INTERFACE.md, "Pacing"). Parameter values: config/sim.yaml (``--params-
 from __future__ import annotations
 
 import time
+from collections import deque
 
 import mujoco
 import numpy as np
@@ -96,6 +97,9 @@ MAX_LAG_S = 0.05
 #: Publish times kept for the latency statistics (by stamp); past the limit the oldest half is dropped
 #: (answers to states that old never come).
 PUBLISHED_KEEP = 256
+#: Latency samples kept for the exit statistics (the newest; 400 sim s at the 2 ms period): a long run's
+#: memory stays flat.
+STATS_WINDOW = 200_000
 
 
 class SimNode(Node):
@@ -209,7 +213,7 @@ class SimNode(Node):
         self.tau = np.zeros(len(JOINT_NAMES))
         self.tau_stamp = -1
         self.published_at: dict[int, float] = {}
-        self.latencies: list[float] = []
+        self.latencies: deque[float] = deque(maxlen=STATS_WINDOW)  # state -> torque, wall s
         self.late = 0  # realtime: periods whose torque was not there by the deadline, of which
         self.late_recent = 0  # ... ran on one at most max_torque_age old
         self.late_waited = 0  # ... waited for one that recent, and got it (late_torque_wait)
@@ -220,7 +224,7 @@ class SimNode(Node):
         #                                     waits until a newer torque arrives)
         self.resends = 0
         self.torques_rejected = 0  # malformed /joint_torques, or stamped ahead of the sim time
-        self.torque_age: list[int] = []
+        self.torque_age = [0, 0, 0]  # sim ns a period's torque was old: periods (after the first), sum, max
         self.fallen = False
         self.k = 0
         self.wall_start = None
@@ -515,12 +519,14 @@ class SimNode(Node):
             else:
                 self.hot.poll(0.0)
                 self.slow_spin(time.perf_counter())
-            self.torque_age.append(t_ns - self.tau_stamp)
+            if self.k:
+                age, old = self.torque_age, t_ns - self.tau_stamp
+                age[0], age[1], age[2] = age[0] + 1, age[1] + old, max(age[2], old)
             self.pusher.update()
             self.sim.step(self._torque(t_ns), self.steps_per_period)
             self.k += 1
             t_next = self.k * self.period_ns
-            if self.k % self.record_every == 0:
+            if self.record_path and self.k % self.record_every == 0:  # kept only to be written
                 self.record.sample(t_next / 1e9, self.sim)
             if not self.fallen and self.sim.has_fallen():
                 self.fallen = True
@@ -545,7 +551,7 @@ class SimNode(Node):
     def on_exit(self) -> None:
         if self.wall_end is None:
             self.wall_end = time.perf_counter()
-        age = np.asarray(self.torque_age[1:] or [0]) / 1e9
+        n, total, longest = self.torque_age
         stats = {
             "pacing": self.pacing, "control_period_s": self.period_ns / 1e9, "physics_dt_s": self.sim.dt,
             "periods": self.k, "sim_s": self.k * self.period_ns / 1e9,
@@ -556,8 +562,8 @@ class SimNode(Node):
             "late_wait_max_s": round(self.late_wait_max, 4),
             "servo_holds": self.servo.entries,
             "resends": self.resends, "cpu_s": round(time.process_time() - self.cpu_start, 3),
-            "latency": latency_summary(self.latencies[1:]),
-            "torque_age_s": {"mean": round(float(age.mean()), 6), "max": round(float(age.max()), 6)},
+            "latency": latency_summary(list(self.latencies)[1:]),
+            "torque_age_s": {"mean": round(total / max(n, 1) / 1e9, 6), "max": round(longest / 1e9, 6)},
             "gc": gc_summary(self),
         }
         self.record.stats = stats
