@@ -32,7 +32,7 @@ demo: $(STAMP)
 ## test: set up, lint, then the whole test suite (unit + multi-process)
 test: $(STAMP)
 	$(VENV)/bin/ruff check cpg_walker test
-	$(PY) -m pytest -q test
+	$(PY) -m pytest -q --durations=25 test
 
 ## test-fast: the in-process unit tests only
 test-fast: $(STAMP)
