@@ -35,6 +35,19 @@ def _load() -> dict:
     return {"1min": round(one, 2), "5min": round(five, 2), "15min": round(fifteen, 2)}
 
 
+def median_us(fn, n: int, repeats: int) -> float:
+    """Median over ``repeats`` of the mean wall time (us) of ``n`` calls of ``fn``."""
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(n):
+            fn()
+        times.append((time.perf_counter() - t0) / n * 1e6)
+    import numpy as np
+
+    return float(np.median(times))
+
+
 def _machine() -> dict:
     import os
 

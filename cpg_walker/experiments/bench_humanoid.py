@@ -12,21 +12,10 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 from cpg_walker.cpg.network import CPGNetwork
+from cpg_walker.experiments.bench import median_us
 from cpg_walker.walker.controller import HumanoidCPG
 from cpg_walker.walker.learning import learning_settings
-
-
-def _median_us(fn, n: int, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(n):
-            fn()
-        times.append((time.perf_counter() - t0) / n * 1e6)
-    return float(np.median(times))
 
 
 def _controller(N: int, strides: int) -> HumanoidCPG:
@@ -51,8 +40,8 @@ def run(quick: bool = False) -> dict:
         bare = CPGNetwork(ctrl.net.omega.copy(), ctrl.net.params, time_scale=ctrl.net.time_scale)
         bare.freeze()
         out[f"n{N}"] = {
-            "step_us": _median_us(tick, n, reps),
-            "bare_network_step_us": _median_us(lambda b=bare: b.step(0.002), n, reps),
+            "step_us": median_us(tick, n, reps),
+            "bare_network_step_us": median_us(lambda b=bare: b.step(0.002), n, reps),
         }
         def tick_mod(c=ctrl) -> None:
             if c.zeta == c.zeta_command:  # filter settled: command the other speed
@@ -60,7 +49,7 @@ def run(quick: bool = False) -> dict:
             c.step(0.002)
             c.joint_targets()
 
-        out[f"n{N}"]["step_modulating_us"] = _median_us(tick_mod, n, reps)
+        out[f"n{N}"]["step_modulating_us"] = median_us(tick_mod, n, reps)
     settings, params = learning_settings(3)
     if quick:
         from dataclasses import replace

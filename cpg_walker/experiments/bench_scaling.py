@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpg_walker.experiments.bench import median_us
 from cpg_walker.experiments.bench_cpg import BACKENDS, case
 
 #: Oscillators per DOF of the ``oscillators`` section (quick: a subset).
@@ -55,16 +56,6 @@ def run_oscillators(quick: bool = False) -> dict:
             "teaching 3 harmonics of 2.5 rad/s; learning dt 10 ms, playback 1 kHz",
             "step_cost": f"median of {reps_n[0]} x {reps_n[1]} steps", "learning_span_s": span,
             "backends": list(BACKENDS)}
-
-
-def _median_us(fn, n: int, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(n):
-            fn()
-        times.append((time.perf_counter() - t0) / n * 1e6)
-    return float(np.median(times))
 
 
 def _vectorised(R: int, quick: bool) -> dict:
@@ -107,8 +98,8 @@ def _vectorised(R: int, quick: bool) -> dict:
 
         for fn in (loop_play, stack_play, loop_learn, stack_learn):
             fn()  # warm-up (kernels compiled or loaded)
-        play_loop, play_stack = _median_us(loop_play, n, reps), _median_us(stack_play, n, reps)
-        learn_loop, learn_stack = _median_us(loop_learn, n, reps), _median_us(stack_learn, n, reps)
+        play_loop, play_stack = median_us(loop_play, n, reps), median_us(stack_play, n, reps)
+        learn_loop, learn_stack = median_us(loop_learn, n, reps), median_us(stack_learn, n, reps)
         out[backend] = {
             "playback_stacked_us": play_stack, "playback_loop_us": play_loop,
             "playback_speedup": play_loop / play_stack,
