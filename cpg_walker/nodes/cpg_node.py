@@ -402,6 +402,7 @@ class CPGNode(Node):
         """The target source: the recording's opening steps from t = 0, then the CPG."""
         fb.weight = self.fade.weight
         self.source = FeedbackGaitSource(self.ctrl, fb, zeta=zeta, alpha=alpha)
+        self.source.keep_traces = False  # plots' traces: a node's memory stays flat
         self.walk_from_s = self.source.handover + self.source.blend
         self.rejoined_at_s: float | None = None
 

@@ -192,6 +192,9 @@ class FeedbackGaitSource(CPGGaitSource):
     and the hip yaws get the heading pathway's oscillation."""
 
     trace_dt = 0.01  # s of sim time between g_trace samples
+    #: Keep g_trace and the touchdown logs (for plots of a run); a node that runs for hours sets it False
+    #: (g_trace alone grows ~18 kB per sim s).
+    keep_traces = True
 
     def __init__(self, ctrl: HumanoidCPG, feedback: FeedbackController, **kwargs):
         super().__init__(ctrl, **kwargs)
@@ -217,7 +220,7 @@ class FeedbackGaitSource(CPGGaitSource):
         self.feedback_g = g if np.any(g) else None
         self.ctrl.set_dof_amplitude_scale(fb.amplitude(z))
         st = self.ctrl.net.state
-        if fb.touchdowns[1]:
+        if fb.touchdowns[1] and self.keep_traces:
             ph = phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0])
             self.touchdown_phases.append(ph)
             self.touchdown_log.append((t, z, ph))
@@ -225,7 +228,7 @@ class FeedbackGaitSource(CPGGaitSource):
             d = phase_reset(st, self.ctrl.net.omega, target, strength=strength)
             fb.resets.append((t, d))
         self._yaw_u = fb.heading_amplitude()
-        if t >= self._next_trace - 1e-9:  # one sample per trace_dt of sim time, whatever the tick rate
+        if self.keep_traces and t >= self._next_trace - 1e-9:  # one per trace_dt, whatever the tick rate
             self.g_trace.append((t, *fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
             self._next_trace = t + self.trace_dt
 
