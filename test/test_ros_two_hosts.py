@@ -62,7 +62,8 @@ def test_walk_across_two_hosts(tmp_path, ros_domain):
 
 @needs_netns
 def test_veth_pair_is_always_removed():
-    """A pair is removed when its block raises; a pair left by a process that is gone (a crashed run) is
+    """A pair is handed out with both ends up (carrier and address); it is removed when its block raises;
+    a pair left by a process that is gone (a crashed run) is
     removed by the next pair's creation; a live process's pair is not."""
     dead = subprocess.Popen(["true"])
     dead.wait()
@@ -78,6 +79,9 @@ def test_veth_pair_is_always_removed():
                 shown = subprocess.run(["ip", "-n", h.netns, "addr", "show", "dev", h.device],
                                        capture_output=True, text=True, check=True).stdout
                 assert f"inet {h.address}/30" in shown and ",UP," in shown, shown
+                # up with carrier before the pair is handed out: a DDS participant started on a link
+                # still coming up announces 127.0.0.1 and is never reached from the other side
+                assert ",LOWER_UP" in shown and netns.is_up(h), shown
             raise RuntimeError("inside")
         assert not {a.netns, b.netns} & _namespaces()
     finally:

@@ -89,6 +89,33 @@ def remove_stale() -> list[str]:
     return gone
 
 
+#: Wall s a new veth end may take to come up (it usually takes a few ms; a loaded machine, longer).
+UP_TIMEOUT_S = 30.0
+
+
+def is_up(host: Host) -> bool:
+    """The veth end is operationally up (its carrier: the peer end is up too) and has its address."""
+    link = _ip(["ip", "-n", host.netns, "-o", "link", "show", "dev", host.device])
+    addr = _ip(["ip", "-n", host.netns, "-o", "-4", "addr", "show", "dev", host.device])
+    flags = link.split("<", 1)[1].split(">", 1)[0].split(",") if "<" in link else []
+    return "LOWER_UP" in flags and " state UP " in link and f"inet {host.address}/" in addr \
+        and "tentative" not in addr
+
+
+def wait_until_up(host: Host, timeout: float = UP_TIMEOUT_S) -> None:
+    """Block until ``is_up(host)``. A DDS participant started in the namespace before that finds only lo:
+    Fast DDS then announces 127.0.0.1 as its address, and the far side, sending there, never reaches it
+    (measured: a node started right after the pair's creation was not discovered in 20 s; 1 s later, it
+    was within 3 s). RuntimeError after ``timeout`` wall s."""
+    import time
+
+    end = time.monotonic() + timeout
+    while not is_up(host):
+        if time.monotonic() > end:
+            raise RuntimeError(f"{host.device} in {host.netns} not up within {timeout} s")
+        time.sleep(0.01)
+
+
 class VethPair:
     """Context manager: two namespaces (lo up in each) joined by a veth pair with the two host addresses
     of ``subnet`` (a /30); yields the two Hosts; always deletes both namespaces on exit."""
@@ -114,6 +141,8 @@ class VethPair:
                 _ip(["ip", "-n", h.netns, "addr", "add", f"{h.address}/{self.prefixlen}", "dev", h.device])
                 _ip(["ip", "-n", h.netns, "link", "set", "lo", "up"])
                 _ip(["ip", "-n", h.netns, "link", "set", h.device, "multicast", "on", "up"])
+            for h in self.hosts:
+                wait_until_up(h)
         except BaseException:
             self.remove()
             raise
