@@ -95,6 +95,38 @@ def test_source_forecast_matches_the_targets_it_then_gives(source, t0):
     assert np.ptp(q[:, JOINT_NAMES.index("lleg_joint_4")]) > 0.02  # the knee moves over the horizon
 
 
+def test_a_foreseen_stop_fades_the_steps_to_the_standing_posture(source):
+    """``stop_fade`` is 1 up to the stop, then falls C² to 0 (and stays); a forecast with it equals the
+    plain one where the fade is 1, ends in the gait's mean posture (α = 0: the offsets, velocity 0) where
+    it is 0, and scales only the oscillating part in between; bad fades are refused."""
+    from cpg_walker.walker.gait_source import stop_fade
+
+    h_s, stop_s = 1.0, 3.0
+    offs = np.round(np.arange(0.0, h_s + stop_s + 1e-9, STEP_S), 9)
+    fade = stop_fade(offs, h_s, stop_s)
+    assert np.all(fade[offs <= h_s] == 1.0) and fade[-1] == 0.0 and np.all(np.diff(fade) <= 0)
+    np.testing.assert_allclose(stop_fade([h_s + 0.5 * stop_s], h_s, stop_s), [0.5])
+    source.targets(9.0)
+    times = 9.0 + offs
+    q0, qd0 = source.forecast(times)
+    q, qd = source.forecast(times, fade)
+    ones = fade == 1.0
+    np.testing.assert_allclose(q[ones], q0[ones], atol=1e-12)
+    dofs = source._idx
+    offset = source.ctrl.net.offset
+    np.testing.assert_allclose(q[-1, dofs], offset, atol=1e-12)
+    np.testing.assert_allclose(qd[-1, dofs], 0.0, atol=1e-12)
+    mid = np.flatnonzero((fade > 0.2) & (fade < 0.8))
+    np.testing.assert_allclose(q[mid][:, dofs] - offset, (q0[mid][:, dofs] - offset) * fade[mid, None],
+                               atol=1e-9)
+    with pytest.raises(ValueError, match="fade"):
+        source.ctrl.forecast(offs, fade[:-1])
+    with pytest.raises(ValueError, match="fade"):
+        source.ctrl.forecast(offs, fade + 0.5)
+    with pytest.raises(ValueError, match="stop_fade"):
+        stop_fade(offs, h_s, -1.0)
+
+
 def test_source_forecast_follows_a_modulation_command(source):
     """With ζ/α commands being reached, the forecast advances the command filters too."""
     source.targets(9.0)
@@ -324,3 +356,19 @@ def test_the_walking_robot_rides_out_a_gap_on_the_horizon(gap_at, horizon):
     assert gapped.modes == {LIVE, HORIZON}
     after = run.base_xy[run.t > gap_at + gap_s + 2.0]
     assert np.linalg.norm(after[-1] - after[0]) > 0.2  # walking on after the gap (0.075 m/s)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("horizon_stop", [None, 0.0])
+def test_a_lost_cpg_node_stops_the_robot_on_the_horizon_then_crouches(horizon_stop):
+    """cpg_node lost for good at 9.0 s (the moment a fresh-clone CI run's graph fell; in-process it
+    falls at the same 11.37 s): pid_node follows its last horizon to the end, then blends to the crouch.
+    With the horizon's foreseen stop (config/cpg.yaml's horizon_stop) the robot stands through it all;
+    the control case without one (the crouch from the horizon's mid-stride end) falls."""
+    from cpg_walker.experiments.fault_phases import run_cpg_loss_one
+
+    run = run_cpg_loss_one(9.0, horizon_stop)
+    if horizon_stop == 0.0:
+        assert run["fell"], "the control case: without the foreseen stop this loss fells the robot"
+    else:
+        assert run["horizon_stop_s"] > 0 and not run["fell"], run

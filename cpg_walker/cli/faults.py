@@ -23,6 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--in-process", action="store_true",
                    help="instead: the PID lost for --away sim s at 11 phases of a stride, "
                         "in-process; back by tracking the live gait vs re-entering it (fault_phases.json)")
+    p.add_argument("--cpg-loss", action="store_true",
+                   help="instead: cpg_node lost for good at 80 times over 6.4 strides, in-process: pid_node "
+                        "on its last horizon, with and without the horizon's foreseen stop (cpg_loss.json)")
     p.set_defaults(func=_run)
 
 
@@ -31,6 +34,17 @@ def _run(args: argparse.Namespace) -> int:
 
     from cpg_walker.experiments.faults import markdown_table, run_faults
 
+    if args.cpg_loss:
+        from pathlib import Path
+
+        from cpg_walker.experiments.fault_phases import run_cpg_loss
+
+        report = run_cpg_loss()
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "cpg_loss.json").write_text(json.dumps(report, indent=1) + "\n")
+        print(json.dumps(report["summary"]))
+        return 0
     if args.in_process:
         from pathlib import Path
 

@@ -111,3 +111,84 @@ def run_phases(away: float = 3.0, kill_times=KILL_TIMES, modes=MODES, say=print)
         summary[mode] = {"fell": sum(r["fell"] for r in mine), "of": len(mine),
                          "median_speed_mps": round(float(np.median(speeds)), 4) if speeds else None}
     return {"away_s": away, "kill_times_s": list(kill_times), "summary": summary, "runs": runs}
+
+
+#: cpg_node-loss times (``run_cpg_loss``): every 0.1 s over 6.4 strides once the CPG walks alone.
+CPG_LOSS_TIMES = tuple(round(7.05 + 0.1 * k, 2) for k in range(80))
+
+
+class CpgLoss:
+    """A target source as pid_node sees cpg_node's death at ``t_kill``: the gait and its /joint_trajectory
+    horizon (every horizon_step, with ``horizon_stop`` s of foreseen stop) until then, afterwards only the
+    last horizon and, past its end, the standing crouch (robot/trajectory.py's GapBridge, pid_node's)."""
+
+    def __init__(self, source, t_kill: float, bridge, horizon: float, horizon_stop: float,
+                 step: float) -> None:
+        from cpg_walker.walker.gait_source import stop_fade
+
+        self.source, self.t_kill, self.bridge, self.step = source, t_kill, bridge, step
+        self.names = source.names
+        self.offsets = np.round(np.arange(0.0, horizon + horizon_stop + 1e-9, step), 9)
+        self.fade = stop_fade(self.offsets, horizon, horizon_stop) if horizon_stop > 0 else None
+        self.next_horizon = 0.0
+        self.live: tuple | None = None
+
+    def observe(self, *sample) -> None:
+        if sample[0] < self.t_kill:  # the node's feedback dies with it
+            self.source.observe(*sample)
+
+    def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        from cpg_walker.nodes.validation import validate_joint_trajectory
+
+        t_ns = round(t * 1e9)
+        if t < self.t_kill:
+            q, v = self.source.targets(t)
+            self.live = (q, v, t_ns)
+            if t >= self.next_horizon - 1e-9:
+                qh, vh = self.source.forecast(t + self.offsets, self.fade)
+                offs = np.round(self.offsets * 1e9).astype(np.int64)
+                self.bridge.offer(validate_joint_trajectory(JOINT_NAMES, t_ns, offs, qh, vh))
+                self.next_horizon = t + self.step
+        q, v, live_ns = self.live
+        return self.bridge.reference(t_ns, q, v, live_ns)
+
+
+def run_cpg_loss_one(t_kill: float, horizon_stop: float | None = None, tail: float = 5.0) -> dict:
+    """One walk (the CPG with feedback, zeta 1, cpg_node's horizon settings) whose cpg_node dies at
+    ``t_kill``; ``tail`` s past the crouch blend's end. ``horizon_stop``: None = config/cpg.yaml's."""
+    from cpg_walker.experiments.walk_runs import _controller
+    from cpg_walker.paths import ros_parameters
+    from cpg_walker.robot.hoap2 import Hoap2Sim, default_standing_posture
+    from cpg_walker.robot.pid import PidLaw, load_pid_config
+    from cpg_walker.robot.trajectory import GapBridge
+    from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
+    from cpg_walker.walker.gait_source import FeedbackGaitSource
+    from cpg_walker.walker.loop import run_replay
+
+    cpg, cfg = ros_parameters("cpg.yaml", "cpg"), load_pid_config()
+    stop = float(cpg["horizon_stop"] if horizon_stop is None else horizon_stop)
+    bridge = GapBridge(default_standing_posture(), cfg["safe_blend"], cfg["resume_blend"])
+    source = FeedbackGaitSource(_controller(), FeedbackController(FeedbackConfig.load()))
+    loss = CpgLoss(source, t_kill, bridge, float(cpg["horizon"]), stop, float(cpg["horizon_step"]))
+    sim = Hoap2Sim()
+    sim.reset()
+    end = t_kill + float(cpg["horizon"]) + stop + float(cfg["safe_blend"]) + tail
+    r = run_replay(sim, loss, PidLaw.from_config(config=cfg), end)
+    return {"t_kill": t_kill, "horizon_stop_s": stop, "fell": bool(r.fell),
+            "fall_time_s": None if r.fall_time_s is None else round(float(r.fall_time_s), 2)}
+
+
+def run_cpg_loss(kill_times=CPG_LOSS_TIMES, stops: tuple[float | None, ...] = (0.0, None), say=print) -> dict:
+    """cpg_node lost at each kill time, with the horizon's foreseen stop (config/cpg.yaml's) and without
+    it (0: the crouch straight from the horizon's mid-stride end); falls per setting."""
+    runs = []
+    for stop in stops:
+        for k, t_kill in enumerate(kill_times):
+            runs.append(run_cpg_loss_one(t_kill, stop))
+            say(f"[stop {runs[-1]['horizon_stop_s']:g} s {k + 1}/{len(kill_times)}] {runs[-1]}")
+    summary = {}
+    for stop in sorted({r["horizon_stop_s"] for r in runs}):
+        mine = [r for r in runs if r["horizon_stop_s"] == stop]
+        summary[f"horizon_stop_{stop:g}s"] = {"fell": sum(r["fell"] for r in mine), "of": len(mine),
+                                              "fell_at_kill_s": [r["t_kill"] for r in mine if r["fell"]]}
+    return {"kill_times_s": list(kill_times), "summary": summary, "runs": runs}

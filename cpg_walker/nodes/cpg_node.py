@@ -4,7 +4,9 @@ Thin wiring around ``cpg.humanoid.CPGGaitSource``: on every ``/clock`` tick it a
 tick's sim time and publishes ``/joint_targets`` stamped with it, and (``lookahead``) also the next
 period's target, exactly like target_player_node, so lockstep runs stay deterministic. ``zeta``/``alpha``
 are the oscillators' modulation commands (HumanoidCPG's smoothed ζ/α), never a scaling of the output.
-Every ``horizon_step`` of sim time it also publishes the next ``horizon`` seconds of targets as
+Every ``horizon_step`` of sim time it also publishes the next ``horizon`` seconds of targets, and then
+``horizon_stop`` seconds in which the stepping dies out (a foreseen stop: where pid_node goes if this node
+dies), as
 ``/joint_trajectory`` (``CPGGaitSource.forecast``: the CPG stepped ahead on a copy of its state), which
 pid_node follows when the live targets are late; the live targets are unaffected by it. Its points are
 at every tick until the next message is due (a target late by a few ticks is then on a point: what the
@@ -83,7 +85,7 @@ from cpg_walker.walker.cmd_vel import (
 )
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE, HumanoidCPG, modulation_error
 from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig, FeedbackController
-from cpg_walker.walker.gait_source import FeedbackGaitSource, _smootherstep
+from cpg_walker.walker.gait_source import FeedbackGaitSource, _smootherstep, stop_fade
 from cpg_walker.walker.learning import load_controller
 
 STATE_FIELDS = ("phase_rad", "frequency_hz", "amplitude_rad")
@@ -105,13 +107,15 @@ publishes:
     output [target q rad, target qd rad/s, offset rad]
   /joint_trajectory (trajectory_msgs/JointTrajectory, every horizon_step of sim time): the targets of
     all 25 joints (positions, velocities) at stamp + every tick period up to horizon_step, then
-    every horizon_step up to horizon (the forecast)
+    every horizon_step up to horizon (the forecast), then on to horizon + horizon_stop with the steps
+    dying out to the gait's standing posture (alpha -> 0: the stop pid_node follows if this node dies)
   /diagnostics (diagnostic_msgs/DiagnosticArray, every monitor_period): status 'cpg_walker/cpg' with
     state (learning | converged | starting | walking), zeta, alpha (commanded and applied), N, overruns,
     feedback (off | active | fading | stale), feedback_weight, sensor_age_s, sensors_dropped, clock_dropped
 parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N when learning; 0 = the
   learning settings'), zeta [-2, 2] and alpha [0, 2] (settable at run time), lookahead, monitor_period
-  (sim s), horizon and horizon_step (sim s; horizon 0 = no /joint_trajectory), realtime_priority, nice,
+  (sim s), horizon, horizon_stop and horizon_step (sim s; horizon 0 = no /joint_trajectory),
+  realtime_priority, nice,
   cpu_affinity (OS scheduling); feedback (bool), feedback_pathways (names from walker/feedback.py; default:
   the feedback core's),
   feedback.<field> for every FeedbackConfig field (defaults: config/feedback.yaml), sensor_timeout and
@@ -330,12 +334,17 @@ class CPGNode(Node):
         self.horizon_step_ns = round(declare(self, "horizon_step", float_param(
             "sim s between /joint_trajectory points and between messages", 0.002, 1.0,
             read_only=True)) * 1e9)
-        n_points = round(horizon * 1e9 / self.horizon_step_ns)
-        if horizon > 0 and n_points < 1:
+        horizon_stop = declare(self, "horizon_stop", float_param(
+            "sim s after the horizon over which its stepping dies out (alpha -> 0): where pid_node goes when "
+            "this node is gone", 0.0, 10.0, read_only=True))
+        n_points = round((horizon + horizon_stop) * 1e9 / self.horizon_step_ns)
+        if horizon > 0 and round(horizon * 1e9 / self.horizon_step_ns) < 1:
             raise ValueError(f"horizon ({horizon} s) must be 0 or at least horizon_step")
-        # the coarse points (step to horizon); the tick-spaced head is added once the tick period is known
+        # the coarse points (step to horizon + horizon_stop); the tick-spaced head is added once the tick
+        # period is known
         self.horizon_ns = np.arange(1, n_points + 1, dtype=np.int64) * self.horizon_step_ns if horizon > 0 \
             else None
+        self.horizon_s, self.horizon_stop_s = float(horizon), float(horizon_stop)
         for name, value in (("zeta", zeta), ("alpha", alpha)):
             reason = modulation_error(name, value)
             if reason:
@@ -363,6 +372,7 @@ class CPGNode(Node):
         self.horizon_work: deque[float] = deque(maxlen=10_000)  # wall s per horizon (the newest: flat memory)
         self.traj_builder: JointTrajectoryBuilder | None = None
         self.traj_offsets_ns: np.ndarray | None = None
+        self.traj_fade: np.ndarray | None = None
         self.traj_period_ns: int | None = None
         self.tick_ns: int | None = None  # the smallest step seen between /clock ticks
         self.state_msg = Float64MultiArray(layout=state_layout(self.ctrl.names, self.ctrl.net.N))
@@ -544,9 +554,11 @@ class CPGNode(Node):
             spare.joint_targets()
         if self.horizon_ns is not None:  # the forecast with the filters moving, then settled
             offsets = np.concatenate(([0.0, self.source.h], self.horizon_ns / 1e9))
-            spare.forecast(offsets)
+            fade = stop_fade(offsets, self.horizon_s, self.horizon_stop_s)
+            spare.forecast(offsets, fade)
             spare.set_modulation_state(spare.zeta_command, spare.alpha_command)
             spare.forecast(offsets)
+            spare.forecast(offsets, fade)
         state_vector(spare)
         self.get_logger().info(f"CPG warmed up in {time.perf_counter() - t0:.3f} s")
 
@@ -898,14 +910,18 @@ class CPGNode(Node):
 
     def _publish_horizon(self, t_ns: int, period_ns: int) -> None:
         """/joint_trajectory from t_ns (the newest target sent): points every tick period up to
-        horizon_step, then every horizon_step to horizon."""
+        horizon_step, then every horizon_step to horizon + horizon_stop; past horizon the forecast's
+        stepping dies out (`stop_fade`), so a pid_node that follows it to its end (this node gone) has
+        stopped the robot in the gait's standing posture before it blends to the crouch."""
         w0 = time.perf_counter()
         if period_ns != self.traj_period_ns:  # the first message (or a shorter period seen since)
             head = np.arange(0, self.horizon_step_ns, period_ns, dtype=np.int64)
             self.traj_offsets_ns = np.concatenate((head, self.horizon_ns))
+            self.traj_fade = stop_fade(self.traj_offsets_ns / 1e9, self.horizon_s, self.horizon_stop_s) \
+                if self.horizon_stop_s > 0 else None
             self.traj_builder = JointTrajectoryBuilder(self.source.names, self.traj_offsets_ns.tolist())
             self.traj_period_ns = period_ns
-        q, qd = self.source.forecast((t_ns + self.traj_offsets_ns) / 1e9)
+        q, qd = self.source.forecast((t_ns + self.traj_offsets_ns) / 1e9, self.traj_fade)
         self.traj_pub.publish(self.traj_builder.fill(t_ns, q, qd))
         if len(self.horizon_work) < 100_000:
             self.horizon_work.append(time.perf_counter() - w0)

@@ -442,21 +442,31 @@ class HumanoidCPG:
         qd = net.gain * np.einsum("bi,bi->b", net.alpha, self._deriv[0])
         return q, qd
 
-    def forecast(self, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def forecast(self, offsets: np.ndarray, fade: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(q*, q̇*) of the 10 DOFs at ``offsets`` (s ahead, non-decreasing, >= 0): what `joint_targets`
         will give after stepping that far, predicted without changing the controller
         (`CPGNetwork.forecast`, RK4 at up to the guard's step). While a ζ/α command is being reached the
         filters' future is that of `step` at ``control_dt`` (exact, `_filter_path`): ζ at each interval's
-        middle, α at each point. Two (K, 10) arrays."""
+        middle, α at each point. ``fade``: (K,) factors in [0, 1] on the applied α at each offset (a stop
+        foreseen: the oscillators' amplitude, not their phase, goes to 0; None = 1). Two (K, 10) arrays."""
         offsets = np.asarray(offsets, dtype=float).reshape(-1)
         zc, ac = self.zeta_command, self.alpha_command
-        if (self._zf == zc).all() and (self._af == ac).all():  # settled: as applied now
+        settled = (self._zf == zc).all() and (self._af == ac).all()
+        if settled and fade is None:  # as applied now
             return self.net.forecast(offsets)
         h = self.settings.control_dt
-        mid = np.concatenate(([0.0], offsets[:-1])) if offsets.size else offsets
-        zeta = self._filter_path(self._zf, zc, np.rint(0.5 * (mid + offsets) / h))
-        amp = self._filter_path(self._af, ac, np.rint(offsets / h))[:, None] * self.dof_scale[None]
-        return self.net.forecast(offsets, zeta=zeta, amplitude=amp)
+        zeta = None
+        if not settled:
+            mid = np.concatenate(([0.0], offsets[:-1])) if offsets.size else offsets
+            zeta = self._filter_path(self._zf, zc, np.rint(0.5 * (mid + offsets) / h))
+        alpha = np.full(offsets.shape, float(self._af[-1])) if settled else \
+            self._filter_path(self._af, ac, np.rint(offsets / h))
+        if fade is not None:
+            fade = np.asarray(fade, dtype=float).reshape(-1)
+            if fade.shape != offsets.shape or not np.all((fade >= 0) & (fade <= 1)):
+                raise ValueError(f"forecast fade: expected {offsets.size} factors in [0, 1]")
+            alpha = alpha * fade
+        return self.net.forecast(offsets, zeta=zeta, amplitude=alpha[:, None] * self.dof_scale[None])
 
     def _filter_path(self, state: np.ndarray, command: float, steps: np.ndarray) -> np.ndarray:
         """The output of the cascaded lags (`_filter`) after each of ``steps`` steps of control_dt, in

@@ -124,12 +124,13 @@ class CPGGaitSource:
         qc, qdc = self.ctrl.joint_targets()
         return self._compose(t, qc, qdc)
 
-    def forecast(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def forecast(self, times: np.ndarray, fade: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The targets ``targets(t)`` will give at ``times`` (sim s, non-decreasing), predicted without
         advancing the source: the recording where it plays (exact), the CPG's future from
         `HumanoidCPG.forecast` from the network's current time on, composed as `targets` does. Times
         before the network's time take the network's current output; pending ``schedule`` commands
-        and feedback changes are not foreseen. Two (K, 25) arrays."""
+        and feedback changes are not foreseen. ``fade``: (K,) factors on the CPG's α at ``times``
+        (`stop_fade`: a stop foreseen; None = none). Two (K, 25) arrays."""
         times = np.asarray(times, dtype=float).reshape(-1)
         q = np.empty((times.size, len(JOINT_NAMES)))
         qd = np.empty_like(q)
@@ -137,7 +138,8 @@ class CPGGaitSource:
         for k in np.flatnonzero(~cpg):
             q[k], qd[k] = self.playback.targets(float(times[k]))
         if cpg.any():
-            qc, qdc = self.ctrl.forecast(np.maximum(times[cpg] - self._t_net, 0.0))
+            qc, qdc = self.ctrl.forecast(np.maximum(times[cpg] - self._t_net, 0.0),
+                                         None if fade is None else np.asarray(fade, dtype=float)[cpg])
             rows = np.flatnonzero(cpg)
             u = (times[rows] - self.handover) / self.blend if self.blend > 0 else np.ones(rows.size)
             done = u >= 1.0  # past the cross-fade (what _compose gives, for all these points at once)
@@ -179,6 +181,18 @@ def _smootherstep(u: float) -> tuple[float, float]:
     """w(u) = 6u⁵ − 15u⁴ + 10u³ on [0, 1] (C², zero slope and curvature at both ends) and dw/du."""
     u = min(max(u, 0.0), 1.0)
     return u**3 * (10 - 15 * u + 6 * u * u), 30 * u * u * (1 - u) ** 2
+
+
+def stop_fade(offsets_s: np.ndarray, start_s: float, stop_s: float) -> np.ndarray:
+    """The α factor of a foreseen stop at each offset (s ahead): 1 up to ``start_s``, then down to 0 over
+    ``stop_s`` along 1 − smootherstep (C², no jerk at either end), 0 after: the stepping dies out and
+    the robot stands in the gait's mean posture (α = 0: the offsets). The tail of cpg_node's horizon."""
+    if not (start_s >= 0 and stop_s >= 0 and math.isfinite(start_s + stop_s)):
+        raise ValueError(f"stop_fade: start {start_s} and duration {stop_s} must be finite and >= 0")
+    u = (np.asarray(offsets_s, dtype=float) - start_s) / stop_s if stop_s > 0 else \
+        np.where(np.asarray(offsets_s, dtype=float) > start_s, 1.0, 0.0)
+    u = np.clip(u, 0.0, 1.0)
+    return 1.0 - u**3 * (10 - 15 * u + 6 * u * u)
 
 
 class FeedbackGaitSource(CPGGaitSource):
@@ -245,21 +259,22 @@ class FeedbackGaitSource(CPGGaitSource):
             self._add_hip_yaw(q, qd, 0.0)
         return q, qd
 
-    def forecast(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def forecast(self, times: np.ndarray, fade: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """`CPGGaitSource.forecast` plus the heading pathway's hip-yaw oscillation at the held u (its
-        phase advanced at the current frequency)."""
-        q, qd = super().forecast(times)
+        phase advanced at the current frequency; ``fade`` scales it with the steps)."""
+        q, qd = super().forecast(times, fade)
         if self._yaw_u != 0.0:
             times = np.asarray(times, dtype=float).reshape(-1)
             for k in np.flatnonzero(times >= self.active_from):
-                self._add_hip_yaw(q[k], qd[k], max(float(times[k]) - self._t_net, 0.0))
+                self._add_hip_yaw(q[k], qd[k], max(float(times[k]) - self._t_net, 0.0),
+                                  1.0 if fade is None else float(fade[k]))
         return q, qd
 
-    def _add_hip_yaw(self, q: np.ndarray, qd: np.ndarray, ahead_s: float) -> None:
+    def _add_hip_yaw(self, q: np.ndarray, qd: np.ndarray, ahead_s: float, scale: float = 1.0) -> None:
         net = self.ctrl.net
         st = net.state
         w = float(net.frequencies()[RIGHT_HIP2, 0])
         theta = phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0]) + w * ahead_s
-        dq, dqd = hip_yaw_offsets(self._yaw_u, theta, touchdown_phase(self.ctrl.zeta, self.fb.cfg), w)
+        dq, dqd = hip_yaw_offsets(scale * self._yaw_u, theta, touchdown_phase(self.ctrl.zeta, self.fb.cfg), w)
         q[self._yaw_idx] += dq
         qd[self._yaw_idx] += dqd
