@@ -108,7 +108,7 @@ def test_a_foreseen_stop_fades_the_steps_to_the_standing_posture(source):
     np.testing.assert_allclose(stop_fade([h_s + 0.5 * stop_s], h_s, stop_s), [0.5])
     source.targets(9.0)
     times = 9.0 + offs
-    q0, qd0 = source.forecast(times)
+    q0, _ = source.forecast(times)
     q, qd = source.forecast(times, fade)
     ones = fade == 1.0
     np.testing.assert_allclose(q[ones], q0[ones], atol=1e-12)

@@ -234,6 +234,43 @@ def test_feedback_parameters_and_stale_sensor_fade(graph, probe):
 
 @pytest.mark.ros
 @pytest.mark.slow
+def test_a_re_sent_tick_is_answered_again_the_first_one_too(graph, probe):
+    """A lockstep sim re-sends an unanswered state; cpg_node answers a re-sent tick with its target again,
+    identical. The first tick too: it has no lookahead target before it, and a lost first target (a
+    relay's drop, a subscriber still being matched) left pid_node waiting its whole startup_wait."""
+    from sensor_msgs.msg import JointState
+
+    cpg = graph.start("cpg_node", feedback=False)
+    probe.listen("/joint_targets", JointState, 500)
+    stand_in = StandIn(probe, dt=0.002)
+    probe.wait_endpoints("/clock", 1, 1)
+    probe.wait_endpoints("/joint_targets", 1, 1)
+
+    def answers(k: int) -> list:
+        return [m for _, m in probe.received["/joint_targets"] if m.header.stamp.sec == 0
+                and m.header.stamp.nanosec == round(k * stand_in.dt * 1e9)]
+
+    def send(k: int) -> None:
+        stand_in.k = k
+        stand_in.tick()
+
+    # tick 0 until cpg_node answers it (its /clock subscription comes last in its start-up), then again:
+    # each re-sent tick 0 is answered again, and so is a re-sent tick 1
+    probe.wait(lambda: len(answers(0)) >= 1, lambda: f"tick 0 answered\n{cpg.log()[-1500:]}", START_S,
+               each=lambda: send(0))
+    for k, extra in ((0, 2), (1, 2)):
+        for _ in range(extra + (k == 1)):
+            n = len(answers(k))
+            send(k)
+            probe.wait(lambda k=k, n=n: len(answers(k)) > n, lambda k=k: f"tick {k} answered again\n"
+                       f"{cpg.log()[-1500:]}", START_S)
+    for k in (0, 1):
+        first, *again = answers(k)
+        assert again and all(list(m.position) == list(first.position) for m in again), k
+
+
+@pytest.mark.ros
+@pytest.mark.slow
 def test_lockstep_walk_with_feedback_is_bit_identical_and_a_schedule_lands(tmp_path, ros_domain):
     """Two 9 s lockstep walks through sim_node + pid_node + cpg_node with feedback on (the CPG has taken
     over at 6.6 s; a phase reset comes before 8 s), the second with ``--schedule 8,1.2,1``: the change

@@ -877,8 +877,8 @@ class CPGNode(Node):
         if new:
             self._cmd_vel_tick(t_ns)
             self._feedback_tick(t_ns)
-        if t_ns != self.sent_ns:
-            self._publish(t_ns)
+        if not new or t_ns != self.sent_ns:  # a re-sent tick: its target again (it may have been lost;
+            self._publish(t_ns)               # the first tick has no lookahead to cover it)
         period = None
         if self.last_tick_ns is not None and t_ns > self.last_tick_ns:
             period = t_ns - self.last_tick_ns
