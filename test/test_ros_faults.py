@@ -14,13 +14,16 @@ import re
 import pytest
 from ros_helpers import START_S, sim_deadline
 
+from cpg_walker.paths import ros_parameters
+
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 WARM_S = 9.0  # sim s of walking before the first fault (the CPG drives alone from 6.6 s)
-#: sim s the robot must stay up with a node dead: with the cpg node dead, pid_node's watchdog follows the
-#: horizon (cpg.yaml, 1 s), blends to the crouch (pid.yaml safe_blend, 1 s), then it stands (judged over
-#: the last 1 s: a 3 s wait measured 0.047 m/s, still drifting, against 0.090 before the fault)
-HOLD_S = 4.0
+#: sim s the robot must stay up with a node dead: with the cpg node dead, pid_node follows its last horizon
+#: (cpg.yaml: 1 s of gait, then horizon_stop s in which the steps die out), then blends to the crouch
+#: (pid.yaml safe_blend); waited to the blend's end, the robot standing (judged over the last 1 s)
+_CPG, _PID = ros_parameters("cpg.yaml", "cpg"), ros_parameters("pid.yaml", "pid")
+HOLD_S = _CPG["horizon"] + _CPG["horizon_stop"] + _PID["safe_blend"]
 RECOVER_S = 20.0  # sim s after a fault within which the robot must walk again
 #: sim s of walking after a recovery before the next fault (a pid_node killed 1.8 s after walking resumed,
 #: alpha still ramping, and back 23.5 s later fell 1.5 s after its return, once at load ~13-20)
@@ -34,7 +37,8 @@ def _faults(tmp_path, ros_domain):
 
 
 def test_cpg_and_pid_killed_and_restarted(tmp_path, ros_domain):
-    """cpg killed at 9 s: the robot stays up >= 3 sim s on the pid watchdog (horizon, then the crouch);
+    """cpg killed at 9 s: the robot stays up on the pid watchdog (the horizon's gait and stop, then the
+    crouch);
     cpg restarted: it rejoins (log) and the robot walks again without a fall; pid killed: the sim's
     clock goes on, its servos hold, no fall for 3 sim s; pid restarted: it joins and its torques drive
     the sim again (tracking resumes), the released servos make cpg_node re-enter the gait from the
