@@ -422,6 +422,10 @@ class CPGNode(Node):
         REJOIN_AFTER_S, or the sim's servos held the robot while the CPG went on (a controller was lost)."""
         zeta, alpha = self.get_parameter("zeta").value, self.get_parameter("alpha").value
         self.source.reenter(t_ns / 1e9, zeta, alpha)
+        self.next_horizon_ns = 0  # a horizon of the re-entered gait at once: pid_node must not fall back
+        # on the last one, the gait before the re-entry, when a target is late (seen: 128 switches
+        # between the two in 1.3 s after a servo release, and a fall)
+        self.recent.clear()
         self.walk_from_s = self.source.handover + self.source.blend
         self.rejoined_at_s = t_ns / 1e9
         self.reentries += 1
