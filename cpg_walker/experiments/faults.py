@@ -27,15 +27,17 @@ WINDOW_S = 2.0
 #: "Walking again": the speed over the last WINDOW_S at least this fraction of the speed before the faults.
 WALKING_FRACTION = 0.5
 #: The order the nodes are killed and restarted in.
-#: Fast DDS's transports of a node restarted after a SIGKILL: UDP only. Over shared memory the restarted
-#: node could stay deaf (a restarted cpg_node took no message in 167 s, once in 2 restarts here; the dead
-#: process leaves its shared-memory port behind: Fast-DDS issues 2811, 5053).
-RESTART_TRANSPORTS = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
 FAULT_ORDER = ("cpg_node", "pid_node", "sim_node")
 
 
 #: The log line of a restarted node that says it is up (cpg_node: re-entering the gait).
 UP_LOG = {"cpg_node": "re-entering the gait", "pid_node": "PID on 25 joints", "sim_node": "pacing="}
+
+
+def _no_signals():
+    from rclpy.signals import SignalHandlerOptions
+
+    return SignalHandlerOptions.NO
 
 
 @dataclass
@@ -98,6 +100,7 @@ class FaultGraph:
         self.say = say or (lambda text: print(f"faults: {text}", file=sys.stderr, flush=True))
         self.restarts: dict[str, int] = {}
         self._ctx = self._node = self._executor = None
+        self._holders: list = []  # (context, node): participants holding a killed node's DDS ports
 
     # -------------------------------------------------------------- processes
     def params(self, node: str) -> dict:
@@ -147,29 +150,39 @@ class FaultGraph:
             self.odom.fell_at = self.odom.t
 
     def kill(self, node: str) -> None:
-        """SIGKILL the node's process group (no clean-up, as a crash)."""
+        """SIGKILL the node's process group (no clean-up, as a crash); then take its DDS ports
+        (`hold_ports`)."""
         proc = self.graph.procs[node]
         try:
             os.killpg(proc.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
         proc.popen.wait(timeout=30)
+        self.hold_ports()
+
+    def hold_ports(self) -> None:
+        """A participant of this process takes the lowest free participant id: the killed node's, so its
+        restart gets another. A new participant on the dead one's id (the same UDP and shared-memory port
+        numbers) stayed deaf to the running nodes now and then (2 of 12 cpg_node restarts here; a fresh
+        participant saw its endpoints, the running ones exchanged only SPDP with it): they keep sending to
+        the dead process's shared-memory port (Fast-DDS issues 2811, 5053). With the ports held: 0 of 20.
+        A shared-memory-free restart is not available: with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+        rmw_fastrtps keeps shared memory whatever FASTDDS_BUILTIN_TRANSPORTS says (measured)."""
+        import rclpy
+
+        ctx = rclpy.Context()
+        rclpy.init(context=ctx, domain_id=self.graph.domain_id, signal_handler_options=_no_signals())
+        self._holders.append((ctx, rclpy.create_node("faults_port_holder", context=ctx,
+                                                     start_parameter_services=False)))
 
     def restart(self, node: str) -> None:
-        """Start ``node`` again with the same parameters (its previous log kept as <node>.<n>.log), on UDP
-        only (RESTART_TRANSPORTS)."""
+        """Start ``node`` again with the same parameters (its previous log kept as <node>.<n>.log)."""
         n = self.restarts.get(node, 0) + 1
         self.restarts[node] = n
         log = self.graph.procs[node].log_path
         if log.exists():
             log.rename(log.with_name(f"{node}.{n}.log"))
-        saved = dict(self.graph.env)
-        self.graph.env.update(RESTART_TRANSPORTS)
-        try:
-            self.graph.start(node, **self.params(node))
-        finally:
-            self.graph.env.clear()
-            self.graph.env.update(saved)
+        self.graph.start(node, **self.params(node))
 
     # -------------------------------------------------------------- waiting
     def spin(self, seconds: float) -> None:
@@ -221,6 +234,11 @@ class FaultGraph:
         try:
             self.graph.stop_all()
         finally:
+            for ctx, holder in self._holders:
+                import rclpy
+
+                holder.destroy_node()
+                rclpy.try_shutdown(context=ctx)
             if self._node is not None:
                 self._node.destroy_node()
             if self._ctx is not None:

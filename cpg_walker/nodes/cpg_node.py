@@ -115,7 +115,7 @@ publishes:
 parameters: cpg_file (learned YAML; '' = learn at start-up), n_oscillators (N when learning; 0 = the
   learning settings'), zeta [-2, 2] and alpha [0, 2] (settable at run time), lookahead, monitor_period
   (sim s), horizon, horizon_stop and horizon_step (sim s; horizon 0 = no /joint_trajectory),
-  realtime_priority, nice,
+  rejoin_settle (sim s a node joining a running sim stands by, realtime), realtime_priority, nice,
   cpu_affinity (OS scheduling); feedback (bool), feedback_pathways (names from walker/feedback.py; default:
   the feedback core's),
   feedback.<field> for every FeedbackConfig field (defaults: config/feedback.yaml), sensor_timeout and
@@ -337,6 +337,11 @@ class CPGNode(Node):
         horizon_stop = declare(self, "horizon_stop", float_param(
             "sim s after the horizon over which its stepping dies out (alpha -> 0): where pid_node goes when "
             "this node is gone", 0.0, 10.0, read_only=True))
+        self.rejoin_settle_ns = round(declare(self, "rejoin_settle", float_param(
+            "sim s a node that joined a running sim (realtime pacing) stands by before it re-enters the gait "
+            "(pid_node holds the crouch meanwhile); lockstep re-enters at once", 0.0, 10.0,
+            read_only=True)) * 1e9)
+        self.join_seen_ns: int | None = None  # the first tick of a running sim, while standing by
         n_points = round((horizon + horizon_stop) * 1e9 / self.horizon_step_ns)
         if horizon > 0 and round(horizon * 1e9 / self.horizon_step_ns) < 1:
             raise ValueError(f"horizon ({horizon} s) must be 0 or at least horizon_step")
@@ -467,6 +472,7 @@ class CPGNode(Node):
         self.cmd = CmdVelFollower(self.cmd_map, self.cmd.limits, self.get_parameter("zeta").value)
         self.cmd_out, self.cmd_override = None, False
         self.servos_held = self.reenter_pending = False
+        self.join_seen_ns = None
         self.clock_resets += 1
 
     def _declare_cmd_vel(self, zeta: float) -> None:
@@ -759,6 +765,8 @@ class CPGNode(Node):
             self._clock_reset(t_ns)
         if self.last_tick_ns is None and not self.waiting and t_ns > REJOIN_AFTER_S * 1e9 \
                 and self.rejoined_at_s is None:
+            if self._standing_by(t_ns):
+                return
             self._rejoin(t_ns)
         if self.reenter_pending and self.last_tick_ns is not None:
             self.reenter_pending = False
@@ -770,6 +778,19 @@ class CPGNode(Node):
             return
         self.waiting.append((t_ns, time.monotonic()))
         self._run_waiting()
+
+    def _standing_by(self, t_ns: int) -> bool:
+        """Joined a running sim in realtime pacing: publish nothing for ``rejoin_settle`` sim s from the
+        first tick (pid_node holds the crouch), so the gait starts once this node's start-up transients
+        (its publishers being matched, first calls, a backlog of queued ticks) are over. In lockstep the
+        sim waits for every answer: re-enter at once."""
+        if self.lockstep or self.rejoin_settle_ns <= 0:
+            return False
+        if self.join_seen_ns is None:
+            self.join_seen_ns = t_ns
+            self.get_logger().info(f"first /clock tick at {t_ns / 1e9:.3f} s, of a running sim: standing by "
+                                   f"{self.rejoin_settle_ns / 1e9:g} s before re-entering the gait")
+        return t_ns - self.join_seen_ns < self.rejoin_settle_ns
 
     def _clock_jump(self, t_ns: int) -> str:
         """The StampGuard's verdict on the tick t_ns (a stray far-future tick would otherwise end the walk,
