@@ -237,7 +237,8 @@ def test_feedback_parameters_and_stale_sensor_fade(graph, probe):
 def test_a_re_sent_tick_is_answered_again_the_first_one_too(graph, probe):
     """A lockstep sim re-sends an unanswered state; cpg_node answers a re-sent tick with its target again,
     identical. The first tick too: it has no lookahead target before it, and a lost first target (a
-    relay's drop, a subscriber still being matched) left pid_node waiting its whole startup_wait."""
+    relay's drop, a subscriber still being matched) left pid_node waiting its whole startup_wait. A
+    /clock stamped before 0 is dropped with a warning (it ended the node once, in the fuzz test)."""
     from sensor_msgs.msg import JointState
 
     cpg = graph.start("cpg_node", feedback=False)
@@ -267,6 +268,18 @@ def test_a_re_sent_tick_is_answered_again_the_first_one_too(graph, probe):
     for k in (0, 1):
         first, *again = answers(k)
         assert again and all(list(m.position) == list(first.position) for m in again), k
+    # a /clock before 0 (rclpy's own use_sim_time TimeSource raises on it) is dropped, not the node's end
+    bad = stand_in.Clock()
+    bad.clock.sec = -5
+    for _ in range(3):
+        stand_in.clock.publish(bad)
+    probe.wait(lambda: "dropped a message rclpy could not take" in cpg.log(), lambda: cpg.log()[-1500:],
+               START_S)
+    n = len(answers(1))
+    send(1)
+    probe.wait(lambda: len(answers(1)) > n, lambda: f"alive after the bad /clock\n{cpg.log()[-1500:]}",
+               START_S)
+    assert cpg.popen.poll() is None
 
 
 @pytest.mark.ros

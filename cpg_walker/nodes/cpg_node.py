@@ -53,6 +53,7 @@ from cpg_walker.nodes.messages import (
     stamp_ns,
 )
 from cpg_walker.nodes.runtime import (
+    CLOCK_JUMP_NS,
     ActivityStats,
     HotPath,
     StampGuard,
@@ -758,6 +759,10 @@ class CPGNode(Node):
     # ---------------------------------------------------------------- clock
     def _on_clock(self, msg: Clock) -> None:
         t_ns = to_ns(msg.clock.sec, msg.clock.nanosec)
+        if t_ns < 0:  # sim time starts at 0: malformed, not a restarted sim
+            self.sensor_stats["clock_dropped"] += 1
+            self.throttle.warn(self, "/clock negative", f"dropped /clock {t_ns / 1e9:.9g} s: before 0")
+            return
         verdict = self._clock_jump(t_ns)
         if verdict == StampGuard.DROP:
             return
@@ -786,11 +791,15 @@ class CPGNode(Node):
         sim waits for every answer: re-enter at once."""
         if self.lockstep or self.rejoin_settle_ns <= 0:
             return False
-        if self.join_seen_ns is None:
-            self.join_seen_ns = t_ns
-            self.get_logger().info(f"first /clock tick at {t_ns / 1e9:.3f} s, of a running sim: standing by "
-                                   f"{self.rejoin_settle_ns / 1e9:g} s before re-entering the gait")
-        return t_ns - self.join_seen_ns < self.rejoin_settle_ns
+        seen = self.join_seen_ns
+        if seen is not None and not 0 <= t_ns - seen <= self.rejoin_settle_ns + CLOCK_JUMP_NS:
+            seen = None  # time went back, or jumped far ahead (a stray stamp: the guard has no tick yet)
+        if seen is None:
+            if self.join_seen_ns is None:
+                self.get_logger().info(f"first /clock tick at {t_ns / 1e9:.3f} s, of a running sim: standing "
+                                       f"by {self.rejoin_settle_ns / 1e9:g} s before re-entering the gait")
+            self.join_seen_ns = seen = t_ns
+        return t_ns - seen < self.rejoin_settle_ns
 
     def _clock_jump(self, t_ns: int) -> str:
         """The StampGuard's verdict on the tick t_ns (a stray far-future tick would otherwise end the walk,

@@ -32,6 +32,7 @@ from cpg_walker.nodes.runtime import (
     int_param,
     parse_cli,
     settle_process,
+    spin_once_guarded,
     str_param,
 )
 
@@ -175,7 +176,7 @@ def spin_recorder(node: RecorderNode, stopping: list[bool]) -> None:
         node.longest_gap_s = max(node.longest_gap_s, now - last)
         last = now
         if now >= next_slow:
-            executor.spin_once(timeout_sec=0.0)
+            spin_once_guarded(node, executor, 0.0)
             next_slow = now + 0.02
         if now >= next_scan:
             node.scan()

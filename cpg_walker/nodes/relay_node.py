@@ -36,6 +36,7 @@ from cpg_walker.nodes.runtime import (
     int_param,
     parse_cli,
     run_main,
+    spin_once_guarded,
     str_param,
     strs_param,
 )
@@ -199,7 +200,7 @@ def spin_relay(node: RelayNode) -> None:
         now = time.monotonic()
         node.hot.poll(0.005 if nxt is None else min(0.005, max(0.0, nxt - now)))
         if now >= next_slow:
-            executor.spin_once(timeout_sec=0.0)
+            spin_once_guarded(node, executor, 0.0)
             next_slow = now + SLOW_SPIN_S
         if now >= next_diag:
             node.publish_diagnostics()

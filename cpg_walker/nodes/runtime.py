@@ -375,6 +375,22 @@ class HotPath:
             return 0  # SIGINT/SIGTERM shut the context down while we were waiting: the caller stops
 
 
+#: Errors rclpy's own callbacks raise on a malformed message (its use_sim_time TimeSource: a /clock stamp
+#: before 0 -> "Seconds value must not be negative"; a huge one -> OverflowError), which would otherwise end
+#: the node's spin: dropped with a throttled warning.
+RCLPY_MESSAGE_ERRORS = (ValueError, OverflowError)
+_rclpy_throttle = Throttle(1.0)
+
+
+def spin_once_guarded(node, executor, timeout_sec: float) -> None:
+    """``executor.spin_once``; a message rclpy itself cannot take (RCLPY_MESSAGE_ERRORS) is dropped with a
+    throttled warning instead of stopping the node (the node's own callbacks validate what they take)."""
+    try:
+        executor.spin_once(timeout_sec=timeout_sec)
+    except RCLPY_MESSAGE_ERRORS as exc:
+        _rclpy_throttle.warn(node, type(exc).__name__, f"dropped a message rclpy could not take: {exc}")
+
+
 def spin_hot(node, hot: HotPath, executor_period: float = 0.02, idle=None) -> None:
     """Serve ``hot`` continuously, the rest of the node through an executor every ``executor_period`` wall
     seconds; ``idle()`` (if given) runs at that rate too."""
@@ -390,7 +406,7 @@ def spin_hot(node, hot: HotPath, executor_period: float = 0.02, idle=None) -> No
         hot.poll(0.005)
         now = time.monotonic()
         if now >= next_slow:
-            executor.spin_once(timeout_sec=0.0)
+            spin_once_guarded(node, executor, 0.0)
             if idle is not None:
                 idle()
             next_slow = now + executor_period
@@ -417,7 +433,7 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
             executor = SingleThreadedExecutor()
             executor.add_node(node)
             while rclpy.ok():
-                executor.spin_once(timeout_sec=0.1)
+                spin_once_guarded(node, executor, 0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ValueError, InvalidParameterValueException, InvalidParameterTypeException) as exc:

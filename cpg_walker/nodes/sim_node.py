@@ -56,6 +56,7 @@ from cpg_walker.nodes.runtime import (
     latency_summary,
     parse_cli,
     run_main,
+    spin_once_guarded,
     str_param,
 )
 from cpg_walker.nodes.validation import check_finite_scalar, period_ns, reason_key
@@ -450,7 +451,7 @@ class SimNode(Node):
     def slow_spin(self, now: float) -> None:
         """Parameters and services, through the executor, at most every SLOW_SPIN_PERIOD_S of wall time."""
         if now >= self.next_slow:
-            self.executor_.spin_once(timeout_sec=0.0)
+            spin_once_guarded(self, self.executor_, 0.0)
             self.next_slow = now + SLOW_SPIN_PERIOD_S
 
     def state_topics(self) -> list[str]:
