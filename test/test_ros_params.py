@@ -27,17 +27,30 @@ REPO = Path(__file__).resolve().parent.parent
 #: Nodes whose live parameters are compared with their file (cpg_node also loads its CPG file).
 LIVE = ("sim_node", "pid_node", "target_player_node", "cpg_node")
 
+#: wall s before a parameter request is sent again (its response can be lost at the service's start)
+RETRY_S = 10.0
+
 
 def _read_back(probe, node: str, names: list[str], timeout: float = 120.0) -> dict:
     """``names`` of ``/node`` through its get_parameters service, as Python values. The deadline is long:
     a node's parameter services exist from its start, but it answers only once it has finished starting
     (cpg_node loads and warms up its CPG first) on a machine that may be busy."""
+    import time
+
     from rcl_interfaces.srv import GetParameters
 
     client = probe.node.create_client(GetParameters, f"/{node}/get_parameters")
     assert client.wait_for_service(timeout_sec=timeout), f"/{node}/get_parameters not available"
-    future = client.call_async(GetParameters.Request(names=names))
-    assert probe.spin_for(timeout, until=future.done), f"/{node} did not answer within {timeout} s"
+    # asked again every RETRY_S: a response sent before the server has matched this client's response
+    # reader is lost ("failed to send response (timeout)" in the node's log, rmw_fastrtps; seen once in a
+    # fresh-clone run, the relay's)
+    end = time.monotonic() + timeout
+    while True:
+        future = client.call_async(GetParameters.Request(names=names))
+        left = end - time.monotonic()
+        if probe.spin_for(min(RETRY_S, max(left, 0.0)), until=future.done) or left <= RETRY_S:
+            break
+    assert future.done(), f"/{node} did not answer within {timeout} s"
     values = future.result().values
     return {n: from_parameter_value(v) for n, v in zip(names, values, strict=True)}
 
