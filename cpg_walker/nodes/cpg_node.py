@@ -391,7 +391,7 @@ class CPGNode(Node):
         self.buffers = [self.imu, *self.loads]
         self.waiting: deque[tuple[int, float]] = deque()  # lockstep: ticks waiting for their samples
         self.sensors_gave_up = False  # a lockstep wait timed out: no waiting until the samples catch up
-        self.sensor_stats = {"dropped": 0, "wait_timeouts": 0, "clock_dropped": 0}
+        self.sensor_stats = {"dropped": 0, "wait_timeouts": 0, "clock_dropped": 0, "targets_withheld": 0}
         self.clock_guard = StampGuard()  # a tick far from the last awaits confirmation
         self.clock_resets = 0
         self.fb_state = self.fade.state(self.fb_enabled)
@@ -939,6 +939,11 @@ class CPGNode(Node):
             if len(self.recent) > 4:
                 del self.recent[min(self.recent)]
         q, qd = cached
+        if not (np.isfinite(q).all() and np.isfinite(qd).all()):  # never to the servos: pid_node rides
+            self.sensor_stats["targets_withheld"] += 1          # the gap on the horizon, then the crouch
+            self.throttle.warn(self, "non-finite targets", f"withheld non-finite /joint_targets at sim "
+                               f"{t_ns / 1e9:.3f} s ({self.sensor_stats['targets_withheld']} so far)")
+            return
         self.pub.publish(self.builder.fill(t_ns, position=q, velocity=qd))
         self.sent_ns = t_ns
 
@@ -956,6 +961,11 @@ class CPGNode(Node):
             self.traj_builder = JointTrajectoryBuilder(self.source.names, self.traj_offsets_ns.tolist())
             self.traj_period_ns = period_ns
         q, qd = self.source.forecast((t_ns + self.traj_offsets_ns) / 1e9, self.traj_fade)
+        if not (np.isfinite(q).all() and np.isfinite(qd).all()):
+            self.sensor_stats["targets_withheld"] += 1
+            self.throttle.warn(self, "non-finite horizon", f"withheld a non-finite /joint_trajectory at sim "
+                               f"{t_ns / 1e9:.3f} s")
+            return
         self.traj_pub.publish(self.traj_builder.fill(t_ns, q, qd))
         if len(self.horizon_work) < 100_000:
             self.horizon_work.append(time.perf_counter() - w0)
@@ -995,7 +1005,8 @@ class CPGNode(Node):
                 "feedback_pathways": ",".join(fb.pathways), "phase_resets": str(len(fb.resets)),
                 "sensors_dropped": str(self.sensor_stats["dropped"]),
                 "sensor_wait_timeouts": str(self.sensor_stats["wait_timeouts"]),
-                "clock_dropped": str(self.sensor_stats["clock_dropped"])}
+                "clock_dropped": str(self.sensor_stats["clock_dropped"]),
+                "targets_withheld": str(self.sensor_stats["targets_withheld"])}
 
     def _diagnostics(self, t_ns: int, feedback: dict[str, str] | None = None) -> None:
         ok = self.stage != "learning" and getattr(self, "converged", True)
