@@ -26,6 +26,9 @@ NODES = {"sim_node": "sim", "pid_node": "pid", "cpg_node": "cpg"}
 TOPICS = ("/joint_targets", "/joint_torques", "/imu", "/foot_load/left", "/foot_load/right", "/clock",
           "/cmd_vel", "/joint_trajectory", "/sim/servo_hold")
 MESSAGES_PER_TOPIC = 12
+#: frame_id of the probe's own fuzzed /joint_targets (a JointState's frame is not read by pid_node), so the
+#: finiteness check reads cpg_node's targets only
+PROBE_FRAME = "fuzz_probe"
 #: Wild values (any type) sent to randomly drawn parameters of each node (each parameter also gets one
 #: value of a type other than its declared one).
 RANDOM_VALUES = 15
@@ -323,6 +326,8 @@ def test_malformed_messages_on_every_topic_never_reach_the_simulation(walking):
 
     def check(item):
         topic, msg = item
+        if topic == "/joint_targets":  # marked: the probe hears its own, late now and then (1000/s of
+            msg.header.frame_id = PROBE_FRAME  # cpg_node's queue ahead of them)
         pubs[topic].publish(msg)
         sent[topic] = sent.get(topic, 0) + 1
         probe.spin_for(0.005)
@@ -353,7 +358,8 @@ def test_malformed_messages_on_every_topic_never_reach_the_simulation(walking):
     assert states and all(_finite_state(m) for m in states)
     odom = [m for _, m in walking.got["/odom/ground_truth"]]
     assert odom and all(_finite_odom(m) for m in odom)
-    targets = [m for _, m in walking.got["/joint_targets"]]
-    assert all(_finite_state(m) for m in targets)
+    targets = [m for _, m in walking.got["/joint_targets"] if m.header.frame_id != PROBE_FRAME]
+    bad = [m for m in targets if not _finite_state(m)]
+    assert targets and not bad, bad[:2]
     for exe in walking.graph.procs:  # the refusals were logged, throttled per reason
         assert "rejected" in walking.graph.procs[exe].log() or exe == "cpg_node", exe
