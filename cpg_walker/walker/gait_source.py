@@ -180,7 +180,12 @@ class CPGGaitSource:
 def _smootherstep(u: float) -> tuple[float, float]:
     """w(u) = 6u⁵ − 15u⁴ + 10u³ on [0, 1] (C², zero slope and curvature at both ends) and dw/du."""
     u = min(max(u, 0.0), 1.0)
-    return u**3 * (10 - 15 * u + 6 * u * u), 30 * u * u * (1 - u) ** 2
+    return _smoother(u), 30 * u * u * (1 - u) ** 2
+
+
+def _smoother(u):
+    """6u⁵ − 15u⁴ + 10u³ of u (a float or an array, already in [0, 1])."""
+    return u**3 * (10 - 15 * u + 6 * u * u)
 
 
 def stop_fade(offsets_s: np.ndarray, start_s: float, stop_s: float) -> np.ndarray:
@@ -192,7 +197,7 @@ def stop_fade(offsets_s: np.ndarray, start_s: float, stop_s: float) -> np.ndarra
     u = (np.asarray(offsets_s, dtype=float) - start_s) / stop_s if stop_s > 0 else \
         np.where(np.asarray(offsets_s, dtype=float) > start_s, 1.0, 0.0)
     u = np.clip(u, 0.0, 1.0)
-    return 1.0 - u**3 * (10 - 15 * u + 6 * u * u)
+    return 1.0 - _smoother(u)
 
 
 class FeedbackGaitSource(CPGGaitSource):
