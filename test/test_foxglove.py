@@ -374,5 +374,5 @@ def test_a_taken_port_is_one_clear_error_and_starts_nothing(ros_domain, tmp_path
         out = io.StringIO()
         spec = GraphSpec(foxglove=f"127.0.0.1:{port}", duration=1.0, log_dir=str(tmp_path / "logs"))
         with pytest.raises(ValueError, match=rf"did not start: .*127\.0\.0\.1:{port}"):
-            run_foreground(spec, out=out)
+            run_foreground(spec, out=out)  # raises before it returns (status, fall)
     assert not (tmp_path / "logs" / "sim_node.log").exists()

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.outcome import fall_line, report_fall
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("cmd-vel-map", help="measure /cmd_vel's speed vs zeta/alpha map (in-process)")
@@ -44,12 +46,15 @@ def _drive(args: argparse.Namespace) -> int:
 
         res = drive_graph(args.out, args.domain_id, args.attach)
         print(open(f"{args.out}/drive_graph.md", encoding="utf-8").read())
-        return 1 if res["fell"] else 0
+        return report_fall("drive-check", [fall_line("drive-check", res.get("fell_at_s"),
+                                                     what="driven through the graph")] if res["fell"] else [])
     from cpg_walker.experiments.cmd_vel import drive_check, drive_set
     from cpg_walker.progress import Progress
 
     prog = Progress(len(drive_set(args.quick)), "drive-check", "drives")
-    drive_check(args.out, args.jobs, args.quick, args.speed_map, prog)
+    res = drive_check(args.out, args.jobs, args.quick, args.speed_map, prog)
     prog.close()
     print(open(f"{args.out}/drive_check.md", encoding="utf-8").read())
-    return 0
+    return report_fall("drive-check", [
+        fall_line("drive-check", r["fall_time_s"], what=f"drive '{r['label']}'")
+        for r in res["runs"] if r.get("fell")])

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.outcome import walk_status
+
 
 def _schedule(text: str) -> list[tuple[float, float, float]]:
     out = []
@@ -76,4 +78,4 @@ def _run(args: argparse.Namespace) -> int:
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps", "lateral_drift_m",
             "heading_change_deg", "n_oscillators")
     print(json.dumps({k: m[k] for k in keys}))
-    return 0
+    return walk_status("cpg-walk", m)

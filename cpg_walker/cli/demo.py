@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 
 from cpg_walker.cli.graph import add_foxglove_option
+from cpg_walker.cli.outcome import OK, walk_status
 from cpg_walker.nodes.runtime import PACINGS
 
 
@@ -67,4 +68,7 @@ def _run(args: argparse.Namespace) -> int:
     print(f"{summary['duration_s']:.1f} sim s, {summary['distance_m']:+.2f} m along the starting heading, "
           f"heading change {summary['heading_change_deg']:+.0f} deg, {fall}; in {args.out}/: "
           + ", ".join(summary["files"]), file=sys.stderr)
-    return 130 if summary["interrupted"] else 0
+    fell = {**(summary.get("walk") or {}), "fell": summary["fell"], "fall_time_s": summary["fall_time_s"]}
+    during = [s for s in summary["segments"] if summary["fell"] and s["from_s"] <= summary["fall_time_s"]]
+    status = walk_status("demo", fell, f"during '{during[-1]['label']}'" if during else "")
+    return status or (130 if summary["interrupted"] else OK)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.outcome import fall_line, report_fall
 from cpg_walker.nodes.runtime import PACINGS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
@@ -71,4 +72,9 @@ def _run(args: argparse.Namespace) -> int:
                      player=args.player, domain_id=args.domain_id,
                      params=[parse_param(t) for t in args.params], log_dir=args.log_dir,
                      record=args.record, foxglove=args.foxglove)
-    return run_foreground(spec)
+    status, fall = run_foreground(spec)
+    if fall is None:
+        return status
+    t, xy = fall
+    place = "" if xy is None else f", base at x {xy[0]:+.2f} m, y {xy[1]:+.2f} m (world frame)"
+    return report_fall("graph", [fall_line("graph", t, place)]) or status

@@ -20,7 +20,7 @@ def command_modules() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(package.__path__) if m.name not in _NOT_COMMANDS)
 
 
-_NOT_COMMANDS = {"main", "progress"}
+_NOT_COMMANDS = {"main", "outcome", "progress"}
 
 
 class UserError(Exception):

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.outcome import walk_status
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="replay a recorded gait on the simulated HOAP-2; write replay.json")
@@ -36,7 +38,7 @@ def _run(args: argparse.Namespace) -> int:
         keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps",
                 "lateral_drift_m", "heading_change_deg", "real_time_factor")
         print(json.dumps({k: report[k] for k in keys}))
-        return 0
+        return walk_status("replay", report, "through the graph")
     if not args.no_render:
         os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede the mujoco import
 
@@ -47,4 +49,4 @@ def _run(args: argparse.Namespace) -> int:
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps", "lateral_drift_m",
             "heading_change_deg")
     print(json.dumps({k: report[k] for k in keys}))
-    return 0
+    return walk_status("replay", report)

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.outcome import OK, fall_line, report_fall
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("soak", help="walk the graph for minutes with changes every 20 s; memory, overruns")
@@ -29,4 +31,8 @@ def _run(args: argparse.Namespace) -> int:
     table = markdown(report)
     (Path(args.out) / "soak.md").write_text(table)
     print(table, end="")
-    return 1 if report["fell"] else 0
+    if not report["fell"]:
+        return OK
+    last = report["windows"][-1] if report.get("windows") else None
+    what = f"window {last['window'] + 1}: {last['change']}" if last else ""
+    return report_fall("soak", [fall_line("soak", report["fell_at_s"], what=what)])

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.outcome import fall_line, report_fall
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("two-hosts", help="the walk across a veth pair between two network namespaces "
@@ -35,4 +37,5 @@ def _run(args: argparse.Namespace) -> int:
         print(f"{name}: {run['distance_m']:.3f} m in {run['duration_s']:.1f} s, {fall}, real-time factor "
               f"{run['real_time_factor']:.2f}")
     print(f"two_hosts.json in {args.out}")
-    return 0
+    return report_fall("two-hosts", [fall_line("two-hosts", run["fall_time_s"], what=f"{name} walk")
+                                     for name, run in result["runs"].items() if run["fell"]])

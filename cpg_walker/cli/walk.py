@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 
 from cpg_walker.cli.graph import add_foxglove_option
+from cpg_walker.cli.outcome import walk_status
 from cpg_walker.nodes.runtime import PACINGS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
@@ -57,4 +58,4 @@ def _run(args: argparse.Namespace) -> int:
     print(f"walked {report['distance_m']:.3f} m in {report['duration_s']:.1f} s "
           f"({report['mean_speed_mps']:.3f} m/s), {fall}; walk.json in {args.out}"
           + (f"; recording: {report['bag']}" if args.record else ""))
-    return 0
+    return walk_status("walk", report)

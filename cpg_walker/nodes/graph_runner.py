@@ -79,6 +79,28 @@ class GraphSpec:
             out[node][name] = value
         return out
 
+    def with_run_record(self, params: dict[str, dict[str, object]], log_dir: Path) -> Path:
+        """sim_node's run record (its ``record_path``: the fall and where) in ``log_dir`` unless the user
+        gave one; one sample per RECORD_PERIOD_S, so a run until Ctrl-C stays small. Returns its path."""
+        sim = params["sim_node"]
+        sim.setdefault("record_path", str(log_dir / "sim_record.json"))
+        sim.setdefault("record_period", RECORD_PERIOD_S)
+        return Path(str(sim["record_path"]))
+
+
+#: Sim s between the samples of the run record `cpg-walker graph` keeps for its exit status.
+RECORD_PERIOD_S = 1.0
+
+
+def fall_of(record_path: Path) -> tuple[float | None, list | None] | None:
+    """(time, (x, y)) of the fall in sim_node's run record; None when it did not fall or left no record."""
+    from cpg_walker.robot.run_record import RunRecord
+
+    if not record_path.exists():
+        return None
+    record = RunRecord.load(record_path)
+    return (record.fall_time_s, record.fall_xy) if record.fell else None
+
 
 def resolve_domain(domain_id: int | None) -> tuple[int, str]:
     """(domain, where it came from): the option, else ROS_DOMAIN_ID, else a free one."""
@@ -182,14 +204,17 @@ def banner(domain: int, how: str, spec: GraphSpec, log_dir: Path) -> str:
     return "\n".join(lines)
 
 
-def run_foreground(spec: GraphSpec, out: TextIO = sys.stdout) -> int:
-    """Run the graph until the sim ends (or a node fails, or a signal); the exit status: 0 when the sim
-    ended by itself with status 0 (or a signal stopped everything), else the failing node's status."""
+def run_foreground(spec: GraphSpec, out: TextIO = sys.stdout) -> tuple[int, tuple | None]:
+    """Run the graph until the sim ends (or a node fails, or a signal). Returns (status, fall): status 0
+    when the sim ended by itself with status 0 (or a signal stopped everything), else the failing node's;
+    fall: ``fall_of`` sim_node's run record."""
     from cpg_walker.nodes.graph import Graph
 
     params = spec.node_params()
     domain, how = resolve_domain(spec.domain_id)
     log_dir = Path(spec.log_dir) if spec.log_dir else Path(tempfile.mkdtemp(prefix="cpg_walker_graph_"))
+    record_path = spec.with_run_record(params, log_dir)
+    record_path.unlink(missing_ok=True)
     handlers = {s: signal.signal(s, _raise_stop) for s in (signal.SIGTERM, signal.SIGHUP)}
     tail = LogTail(out)
     status = 0
@@ -232,4 +257,4 @@ def run_foreground(spec: GraphSpec, out: TextIO = sys.stdout) -> int:
             for s, h in handlers.items():
                 signal.signal(s, h)
     print("stopped: " + ", ".join(f"{n} {c}" for n, c in codes.items()), file=out, flush=True)
-    return status
+    return status, fall_of(record_path)

@@ -531,8 +531,7 @@ class SimNode(Node):
                 self.record.sample(t_next / 1e9, self.sim)
             if not self.fallen and self.sim.has_fallen():
                 self.fallen = True
-                if not self.record.fell:
-                    self.record.fell, self.record.fall_time_s = True, t_next / 1e9
+                self.record.mark_fall(t_next / 1e9, self.sim)
                 self._publish_fallen()
                 self._publish_diagnostics(t_next)
                 self.get_logger().warn(f"robot has fallen at sim time {t_next / 1e9:.3f} s")

@@ -24,6 +24,7 @@ class RunRecord:
     q: list = field(default_factory=list)
     fell: bool = False
     fall_time_s: float | None = None
+    fall_xy: list | None = None  # the base's (x, y) in the world frame when the fall was detected
     stats: dict = field(default_factory=dict)
 
     def sample(self, t: float, sim: Hoap2Sim) -> None:
@@ -34,6 +35,12 @@ class RunRecord:
         self.heading.append(sim.heading())
         self.loads.append(list(sim.sole_loads()))
         self.q.append(sim.joint_positions().tolist())
+
+    def mark_fall(self, t: float, sim: Hoap2Sim) -> None:
+        """The fall, detected at sim time ``t``: its time and the base's position then (once)."""
+        if not self.fell:
+            self.fell, self.fall_time_s = True, t
+            self.fall_xy = sim.base_pose()[0][:2].tolist()
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.__dict__) + "\n")
