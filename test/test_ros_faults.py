@@ -65,8 +65,15 @@ def test_cpg_and_pid_killed_and_restarted(tmp_path, ros_domain):
         try:
             g.graph.wait_for_log("cpg_node", "re-entering the gait from the standing crouch", START_S)
         except TimeoutError:  # Fast DDS: 2 of 12 restarts on the dead node's ports (FaultGraph.hold_ports)
+            log = g.graph.procs["cpg_node"].log()
+            # the known limit is a deaf node: alive, and never a /clock tick. A node that got its first tick
+            # and then never re-entered (a stand-by that does not end), or one that died, is a failure.
+            assert g.graph.procs["cpg_node"].popen.poll() is None, f"the restarted cpg died: {log[-2000:]}"
+            assert "first /clock tick at" not in log, \
+                f"the restarted cpg node got /clock but never re-entered the gait: {log[-2000:]}"
             pytest.xfail("known limit (docs Faults): the cpg node restarted after a SIGKILL received no "
-                         f"/clock within {START_S} wall s (a middleware fault, despite hold_ports)")
+                         f"/clock within {START_S} wall s (a middleware fault, despite hold_ports; checked: "
+                         "alive, no tick in its log)")
         rejoined = float(re.search(r"joined a running sim at ([\d.]+) s",
                                    g.graph.procs["cpg_node"].log()).group(1))
         assert rejoined > t_kill + HOLD_S, rejoined
@@ -87,12 +94,16 @@ def test_cpg_and_pid_killed_and_restarted(tmp_path, ros_domain):
         g.restart("pid_node")
         g.graph.wait_for_log("pid_node", "joined a running sim", START_S)
         g.wait(lambda: "torques resumed" in g.graph.procs["sim_node"].log(), START_S, "torques resumed")
-        if fell_in_hold is not None:  # seen once in ~5 runs, under load: reported, not hidden
-            pytest.xfail(f"known limit (docs Faults): fell at {fell_in_hold} s in the servos' hold of the "
-                         f"posture at the pid's loss ({t_kill} s); tracking resumed")
         g.graph.wait_for_log("cpg_node", "the servos were released at", START_S)
         back = float(re.search(r"the servos were released at ([\d.]+) s",
                                g.graph.procs["cpg_node"].log()).group(1))
+        if fell_in_hold is not None:  # seen once in ~16 runs, two suites side by side: reported, not hidden
+            # the known limit is a fall while the servos hold the posture: after the pid's loss, before
+            # the release; the checks that still mean something on a fallen robot ran above (the hold
+            # began, pid_node rejoined, torques resumed, cpg_node saw the release)
+            assert t_kill <= fell_in_hold <= back, (t_kill, fell_in_hold, back)
+            pytest.xfail(f"known limit (docs Faults): fell at {fell_in_hold} s in the servos' hold of the "
+                         f"posture at the pid's loss ({t_kill} s); tracking resumed, released at {back} s")
         at = g.wait_walking(WALKING_FRACTION * before, back, back + RECOVER_S, sim_deadline(RECOVER_S))
         assert g.odom.fell_at is None, f"fell at {g.odom.fell_at} s after the pid node came back at {back} s"
         assert at is not None, f"not walking again by {back + RECOVER_S} s (speed {g.odom.speed()})"

@@ -87,6 +87,75 @@ def test_the_walk_survives_the_degraded_link(walk):
     assert "relaying /joint_targets, /joint_states, /imu to /net/" in walk.logs["relay_node"]
 
 
+#: The realtime relayed walk: sim s (the CPG drives alone from the hand-over's end, 6.6 s: 7.4 s of it);
+#: loss; delay and jitter (wall s). `cpg-walker transport` (docs/transport.md, 30 s walks, load 7-16) walked
+#: 20 % loss and 2 ms delay at zeta 1 with feedback and fell at 3 ms; here half that delay, a quarter of
+#: that loss: the test is that the link's delay reaches the physics (realtime) past the hand-over.
+RT_DURATION_S, RT_LOSS, RT_DELAY_S, RT_JITTER_S = 14.0, 0.05, 0.001, 0.0005
+#: m the realtime relayed walk goes at least from the hand-over's end (6.6 s) to 14 s: 7.4 s at the
+#: in-process 0.083 m/s would be 0.61 m; half of it, so a walk that stalls or shuffles in place fails
+RT_MIN_CPG_DISTANCE_M = 0.3
+
+
+@pytest.fixture(scope="module")
+def realtime_walk(tmp_path_factory):
+    """The relayed walk in realtime pacing, well past the CPG hand-over, once for the module."""
+    from ros_helpers import kill_nodes, reserve_domain, sim_deadline
+
+    import cpg_walker.nodes.graph as graph_module
+    from cpg_walker.experiments.walk_graph import run_graph_walk
+
+    out = tmp_path_factory.mktemp("transport_rt")
+    domain, lock = reserve_domain()
+    try:
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(graph_module, "quiet_domain_id", lambda attempts=5: domain)
+            report = run_graph_walk(out, duration=RT_DURATION_S, pacing="realtime", zeta=1.0, feedback=True,
+                                    relay={"loss": RT_LOSS, "delay": RT_DELAY_S, "jitter": RT_JITTER_S,
+                                           "seed": 7},
+                                    node_params={"pid_node": {"startup_wait": START_S}},
+                                    timeout=sim_deadline(RT_DURATION_S))
+    finally:
+        left = kill_nodes(domain)
+        lock.close()
+    logs = {p.stem: p.read_text(errors="replace") for p in (out / "graph_logs").glob("*.log")}
+    return SimpleNamespace(report=report, left=left, logs=logs, out=out)
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_realtime_walk_through_the_lossy_link_walks_past_the_hand_over(realtime_walk):
+    """Realtime pacing: the relay's delay is wall time the physics does not wait for."""
+    import json
+
+    import numpy as np
+
+    from cpg_walker.experiments.demo import walk_start_s
+    from cpg_walker.robot.run_record import RunRecord
+
+    r = realtime_walk.report
+    assert not r["fell"], f"fell at {r['fall_time_s']} s, {RT_LOSS:.0%} loss, {RT_DELAY_S * 1e3:g} ms delay"
+    assert r["duration_s"] == pytest.approx(RT_DURATION_S, abs=0.01)
+    assert realtime_walk.left == []
+    for name, text in realtime_walk.logs.items():
+        assert "Traceback" not in text, (name, text[-2000:])
+    relay = r["relay"]
+    for topic, s in relay.items():
+        assert s["delay_ms"]["p50"] >= RT_DELAY_S * 1e3, (topic, s)
+        bound = 5 * math.sqrt(s["received"] * RT_LOSS * (1 - RT_LOSS))
+        assert abs(s["dropped"] - s["received"] * RT_LOSS) <= bound, (topic, s, bound)
+    # the walk after the hand-over, from the sim's record: forward along the heading then
+    records = sorted(realtime_walk.out.rglob("*record*.json"))
+    assert records, list(realtime_walk.out.rglob("*"))
+    rec = RunRecord.load(records[0])
+    t = [float(x) for x in rec.t]
+    i0 = next(k for k, x in enumerate(t) if x >= walk_start_s())
+    xy = np.asarray(rec.base_xy)
+    h = float(np.asarray(rec.heading)[i0])
+    d = float((xy[-1] - xy[i0]) @ np.array([math.cos(h), math.sin(h)]))
+    assert d >= RT_MIN_CPG_DISTANCE_M, (d, json.dumps({k: r[k] for k in ("distance_m", "real_time_factor")}))
+
+
 @pytest.mark.ros
 @pytest.mark.slow
 def test_the_link_is_settable_at_run_time_with_reasons_for_refusals(graph, probe):
