@@ -8,13 +8,14 @@ end need no graph."""
 
 from __future__ import annotations
 
-import math
 import subprocess
 import sys
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from cpg_walker.nodes.recording import BAG_NAME, read_topics
 from cpg_walker.paths import ros_parameters
@@ -301,16 +302,108 @@ def test_odometry_and_joint_states_pair_by_stamp_in_any_order():
     assert pairs.pairs == [(10, b"o10", b"j10"), (20, b"o20", b"j20")]
 
 
-def test_fast_dds_end_padding_is_read():
-    """Fast DDS sends 4 unset bytes after an empty trailing float64 sequence: the values still read."""
+_floats = st.lists(st.floats(allow_nan=False, width=64), max_size=4)
+_names = st.lists(st.text(st.characters(codec="ascii", exclude_characters="\0"), max_size=5), max_size=4)
+
+
+@st.composite
+def _fast_dds_messages(draw):
+    """(rclpy message, type): the types of the graph with sequences of float64 / int64, any of them empty."""
+    from rcl_interfaces.msg import Parameter, ParameterEvent, ParameterType, ParameterValue
     from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from cpg_walker.nodes.recording import deserialize, typestore
+    kind = draw(st.sampled_from(["js", "traj", "array", "event"]))
+    if kind == "js":
+        msg = JointState(name=draw(_names), position=draw(_floats), velocity=draw(_floats),
+                         effort=draw(_floats))
+        msg.header.frame_id = draw(st.sampled_from(["", "a", "base_link"]))
+        return msg, "sensor_msgs/msg/JointState"
+    if kind == "traj":
+        points = [JointTrajectoryPoint(positions=draw(_floats), velocities=draw(_floats),
+                                       effort=draw(_floats)) for _ in range(draw(st.integers(0, 3)))]
+        return JointTrajectory(joint_names=draw(_names), points=points), "trajectory_msgs/msg/JointTrajectory"
+    if kind == "array":
+        return Float64MultiArray(data=draw(_floats)), "std_msgs/msg/Float64MultiArray"
+    value = ParameterValue(type=ParameterType.PARAMETER_INTEGER_ARRAY,
+                           integer_array_value=draw(st.lists(st.integers(-2**63, 2**63 - 1), max_size=3)))
+    event = ParameterEvent(node=draw(st.sampled_from(["/cpg", "/x"])),
+                           changed_parameters=[Parameter(name="p", value=value)])
+    return event, "rcl_interfaces/msg/ParameterEvent"
 
-    raw = _serialized(JointState(name=["a", "b"], position=[1.0, 2.0], velocity=[3.0, 4.0]))
-    msg = deserialize(typestore(), raw, "sensor_msgs/msg/JointState")
-    assert list(msg.name) == ["a", "b"] and list(msg.position) == [1.0, 2.0] and len(msg.effort) == 0
-    assert math.isfinite(sum(msg.velocity))
+
+@given(_fast_dds_messages())
+@settings(max_examples=40, deadline=None)
+def test_fast_dds_unset_end_bytes_are_cut(case):
+    """rclpy's serialize_message (Fast DDS's typesupport, as on the wire) sizes an empty float64/int64
+    sequence as if 8-aligned and leaves the difference unset after the last field; canonical_cdr cuts it
+    where rosbags' own deserializer ends, keeps every byte before, and stock rosbags then reads the
+    message, equal to what rclpy reads."""
+    from rclpy.serialization import deserialize_message
+
+    from cpg_walker.nodes.recording import canonical_cdr, cdr_end, typestore
+
+    msg, msgtype = case
+    store = typestore()
+    raw = _serialized(msg)
+    out = canonical_cdr(store, raw, msgtype)
+    msgdef = store.get_msgdef(msgtype)
+    end = 4 + msgdef.deserialize_cdr_le(raw[4:], 0, msgdef.cls, store)[1]
+    assert cdr_end(store, msgtype)(raw) == end
+    if len(raw) - end > 3:
+        assert out == raw[:end] + bytes(-end % 4)
+    else:
+        assert out is raw
+    assert canonical_cdr(store, out, msgtype) is out
+    theirs = deserialize_message(raw, type(msg))
+    ours = store.deserialize_cdr(out, msgtype)  # stock: at most 3 bytes after the last field
+    if msgtype == "sensor_msgs/msg/JointState":
+        assert (list(ours.name), ours.position.tolist(), ours.velocity.tolist(), ours.effort.tolist()) \
+            == (list(theirs.name), list(theirs.position), list(theirs.velocity), list(theirs.effort))
+    elif msgtype == "trajectory_msgs/msg/JointTrajectory":
+        assert [(p.positions.tolist(), p.velocities.tolist(), p.effort.tolist()) for p in ours.points] \
+            == [(list(p.positions), list(p.velocities), list(p.effort)) for p in theirs.points]
+    elif msgtype == "std_msgs/msg/Float64MultiArray":
+        assert ours.data.tolist() == list(theirs.data)
+    else:
+        assert ours.changed_parameters[0].value.integer_array_value.tolist() \
+            == list(theirs.changed_parameters[0].value.integer_array_value)
+
+
+def test_the_recorder_writes_what_stock_rosbags_reads(tmp_path):
+    """BagRecorder writes a /joint_targets- and a /joint_torques-like message (as Fast DDS sends them) that
+    rosbags' AnyReader.deserialize reads; a type that cannot carry the unset bytes is written byte for
+    byte as received, and read_topics reads a bag written before the cut (or by ``ros2 bag record``)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from sensor_msgs.msg import Imu, JointState
+
+    from cpg_walker.nodes.recording import BagRecorder, typestore
+
+    targets = _serialized(JointState(name=["a", "b"], position=[1.0, 2.0], velocity=[3.0, 4.0]))
+    torques = _serialized(JointState(name=["a", "b"], effort=[5.0, 6.0]))
+    imu = _serialized(Imu())
+    js = "sensor_msgs/msg/JointState"
+    with BagRecorder(tmp_path / "new") as bag:
+        for topic, msgtype in (("/joint_targets", js), ("/joint_torques", js),
+                               ("/imu", "sensor_msgs/msg/Imu")):
+            bag.add_topic(topic, msgtype)
+        for topic, raw in (("/joint_targets", targets), ("/joint_torques", torques), ("/imu", imu)):
+            bag.write(topic, raw)
+    with AnyReader([tmp_path / "new"]) as reader:
+        got = {c.topic: (raw, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages()}
+    assert got["/joint_targets"][1].position.tolist() == [1.0, 2.0]
+    assert got["/joint_torques"][1].effort.tolist() == [5.0, 6.0]
+    assert len(got["/joint_targets"][0]) == len(targets) - 4  # the 4 unset bytes after the empty effort
+    assert len(got["/joint_torques"][0]) == len(torques) - 8
+    assert got["/imu"][0] == imu
+    store = typestore()
+    old = Writer(tmp_path / "old", version=9, storage_plugin=StoragePlugin.MCAP)
+    old.open()
+    old.write(old.add_connection("/joint_torques", js, typestore=store), 1, torques)
+    old.close()
+    assert read_topics(tmp_path / "old")["/joint_torques"][0][1].effort.tolist() == [5.0, 6.0]
 
 
 def test_a_missing_bag_is_one_clear_error(tmp_path):
