@@ -2,19 +2,25 @@
 
 One short lockstep walk through the graph with ``record=True`` (what ``cpg-walker walk --record`` runs) and a
 zeta change through cpg_node's SetParameters service, read back with rosbags and with the plain ``mcap``
-reader; beside it ``cpg-walker record --duration`` records the same graph from another process. Counts are
-derived from config/sim.yaml (control and odometry periods) and the walk's duration. The unit tests at the
-end need no graph."""
+reader, and decoded message for message by stock rosbags, mcap_ros2 and Foxglove's deserializer (Node.js,
+installed by npm into .venv/npm); beside it ``cpg-walker record --duration`` records the same graph from
+another process. Counts are derived from config/sim.yaml (control and odometry periods) and the walk's
+duration. The unit tests at the end need no graph."""
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 import subprocess
 import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from cpg_walker.nodes.recording import BAG_NAME, read_topics
 from cpg_walker.paths import ros_parameters
@@ -252,6 +258,171 @@ def test_robot_description_is_recorded(walk):
     assert "<robot" in msgs[0][1].data
 
 
+# ------------------------------------------------------- stock readers: rosbags, mcap_ros2, Foxglove's
+
+JS_DIR = Path(__file__).parent / "js"
+READERS = ("rosbags", "mcap_ros2", "foxglove")
+
+
+@functools.cache
+def _store():
+    from cpg_walker.nodes.recording import typestore
+
+    return typestore()
+
+
+def _plain(v):
+    """A decoded message as plain values (dicts, lists, str, int, float; non-finite floats as their repr),
+    whichever library decoded it: rosbags' dataclasses and numpy arrays, mcap_ros2's namespaces and bytes,
+    Foxglove's JSON (int64 as {"$int": ...}, non-finite floats as {"$float": ...}: decode_ros2.cjs)."""
+    if dataclasses.is_dataclass(v):  # rosbags': its fields (not the type's constants, which it has too)
+        return {name: _plain(getattr(v, name)) for name, _ in _store().fielddefs[v.__msgtype__][1]}
+    if isinstance(v, SimpleNamespace):
+        return {k: _plain(getattr(v, k)) for k in type(v).__slots__}
+    if isinstance(v, dict):
+        if set(v) == {"$int"}:
+            return int(v["$int"])
+        if set(v) == {"$float"}:
+            return _plain(float(v["$float"]))
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, np.ndarray):
+        return v.tolist() if v.dtype.kind != "f" or np.isfinite(v).all() else _plain(v.tolist())
+    if isinstance(v, np.generic):
+        return _plain(v.item())
+    if isinstance(v, bytes | bytearray):
+        return list(v)
+    if isinstance(v, list | tuple):
+        if all(type(x) is int or type(x) is str or (type(x) is float and math.isfinite(x)) for x in v):
+            return list(v)
+        return [_plain(x) for x in v]
+    if isinstance(v, float) and not math.isfinite(v):
+        return repr(v)
+    return v
+
+
+@pytest.fixture(scope="module")
+def foxglove_decoder():
+    """The command that runs test/js/decode_ros2.cjs with Foxglove's deserializer, installed by ``npm ci``
+    from test/js/package-lock.json into .venv/npm (once per venv and lock file)."""
+    import shutil
+
+    npm, node = shutil.which("npm"), shutil.which("node")
+    if npm is None or node is None:
+        pytest.skip("npm / Node.js not installed: Foxglove's deserializer (@foxglove/rosmsg2-serialization, "
+                    "an npm package) cannot run")
+    dest = Path(sys.prefix) / "npm"
+    lock = (JS_DIR / "package-lock.json").read_bytes()
+    installed = dest / "node_modules" / "@foxglove" / "rosmsg2-serialization"
+    if not installed.is_dir() or not (dest / "package-lock.json").exists() \
+            or (dest / "package-lock.json").read_bytes() != lock:
+        dest.mkdir(parents=True, exist_ok=True)
+        for name in ("package.json", "package-lock.json"):
+            shutil.copy(JS_DIR / name, dest / name)
+        done = subprocess.run([npm, "ci", "--no-audit", "--no-fund", "--prefix", str(dest)],
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, f"npm ci of Foxglove's deserializer failed:\n{done.stderr[-2000:]}"
+    return [node, str(JS_DIR / "decode_ros2.cjs")], {"NODE_PATH": str(dest / "node_modules")}
+
+
+def _foxglove_message(result: dict) -> dict:
+    if "error" in result:
+        raise ValueError(result["error"])
+    return result["message"]
+
+
+@pytest.fixture(scope="module")
+def stock_decoded(walk, foxglove_decoder):
+    """Every message of the recording decoded by each reader as a user's script would: rosbags' AnyReader
+    (``reader.deserialize``), mcap_ros2's decoder (``iter_decoded_messages``), Foxglove's MessageReader.
+    {reader: {topic: [(log time, raw CDR, plain message)]}} sorted by (time, raw); rejections in
+    ``errors`` ({reader: {topic: (count, first error)}}), Foxglove's bytes after the last field in
+    ``trailing`` ({topic: most})."""
+    import base64
+    import json
+    import os
+
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.highlevel import AnyReader
+
+    path = walk.out / f"{BAG_NAME}.mcap"
+    out: dict[str, dict[str, list]] = {r: {} for r in READERS}
+    errors: dict[str, dict[str, tuple[int, str]]] = {r: {} for r in READERS}
+
+    def keep(reader: str, topic: str, ns: int, raw: bytes, decode) -> None:
+        try:
+            msg = _plain(decode())
+        except Exception as exc:  # any rejection is counted and shown
+            n, first = errors[reader].get(topic, (0, f"{type(exc).__name__}: {exc}"))
+            errors[reader][topic] = (n + 1, first)
+            return
+        out[reader].setdefault(topic, []).append((ns, bytes(raw), msg))
+
+    with AnyReader([walk.out]) as reader:
+        for conn, ns, raw in reader.messages():
+            keep("rosbags", conn.topic, ns, raw, lambda r=reader, c=conn, d=raw: r.deserialize(d, c.msgtype))
+    lines, meta, seen, decoders = [], [], set(), {}
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        for schema, channel, message in reader.iter_messages(log_time_order=True):
+            if schema.id not in decoders:
+                decoders[schema.id] = DecoderFactory().decoder_for(channel.message_encoding, schema)
+            keep("mcap_ros2", channel.topic, message.log_time, message.data,
+                 functools.partial(decoders[schema.id], message.data))
+            line = {"topic": channel.topic, "data": base64.b64encode(message.data).decode()}
+            if channel.topic not in seen:
+                seen.add(channel.topic)
+                line["schema"] = schema.data.decode()
+            lines.append(json.dumps(line))
+            meta.append((message.log_time, bytes(message.data)))
+    cmd, env = foxglove_decoder
+    done = subprocess.run(cmd, input="\n".join(lines) + "\n", capture_output=True, text=True, timeout=120,
+                          env={**os.environ, **env})
+    assert done.returncode == 0, done.stderr[-2000:]
+    results = [json.loads(line) for line in done.stdout.splitlines()]
+    assert len(results) == len(meta)
+    trailing: dict[str, int] = {}
+    for (ns, raw), res in zip(meta, results, strict=True):
+        if "error" not in res:
+            trailing[res["topic"]] = max(trailing.get(res["topic"], 0), res["trailing"])
+        keep("foxglove", res["topic"], ns, raw, functools.partial(_foxglove_message, res))
+    for topics in out.values():
+        for samples in topics.values():
+            samples.sort(key=lambda s: (s[0], s[1]))
+    counts = {c.topic: summary.statistics.channel_message_counts[c.id] for c in summary.channels.values()}
+    return SimpleNamespace(messages=out, errors={r: e for r, e in errors.items() if e}, trailing=trailing,
+                           counts=counts)
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_stock_readers_decode_every_message_alike(walk, stock_decoded):
+    """A user's script reads the recording with stock rosbags (AnyReader.deserialize), mcap_ros2's
+    decoder or Foxglove's deserializer: each decodes every message of every topic (none rejected, no
+    more than the 3 bytes of CDR's end alignment after the last field), and the three agree field for
+    field, message for message (non-finite floats by their repr), with what read_topics reads too."""
+    d = stock_decoded
+    assert d.errors == {}
+    assert {t: n for t, n in d.trailing.items() if n > 3} == {}
+    for reader in READERS:
+        assert {t: len(v) for t, v in d.messages[reader].items()} == d.counts, reader
+    assert set(d.counts) >= set(TYPES)
+    for topic in d.counts:
+        ref = d.messages["rosbags"][topic]
+        for reader in READERS[1:]:
+            other = d.messages[reader][topic]
+            bad = [i for i, (a, b) in enumerate(zip(ref, other, strict=True)) if a != b]
+            assert not bad, (topic, reader, ref[bad[0]], other[bad[0]])
+    targets = [m for _, _, m in d.messages["foxglove"]["/joint_targets"]]
+    ours = [m for _, m in walk.data["/joint_targets"]]
+    assert [t["name"] for t in targets] == [list(m.name) for m in ours]
+    assert [t["position"] for t in targets] == [m.position.tolist() for m in ours]
+    assert all(len(t["position"]) == len(t["name"]) > 0 and t["effort"] == [] for t in targets)
+    torques = [m for _, _, m in d.messages["mcap_ros2"]["/joint_torques"]]
+    assert [t["effort"] for t in torques] == [m.effort.tolist() for _, m in walk.data["/joint_torques"]]
+
+
 # ------------------------------------------------------------------------------ no graph needed
 
 def _serialized(msg) -> bytes:
@@ -301,16 +472,108 @@ def test_odometry_and_joint_states_pair_by_stamp_in_any_order():
     assert pairs.pairs == [(10, b"o10", b"j10"), (20, b"o20", b"j20")]
 
 
-def test_fast_dds_end_padding_is_read():
-    """Fast DDS sends 4 unset bytes after an empty trailing float64 sequence: the values still read."""
+_floats = st.lists(st.floats(allow_nan=False, width=64), max_size=4)
+_names = st.lists(st.text(st.characters(codec="ascii", exclude_characters="\0"), max_size=5), max_size=4)
+
+
+@st.composite
+def _fast_dds_messages(draw):
+    """(rclpy message, type): the types of the graph with sequences of float64 / int64, any of them empty."""
+    from rcl_interfaces.msg import Parameter, ParameterEvent, ParameterType, ParameterValue
     from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-    from cpg_walker.nodes.recording import deserialize, typestore
+    kind = draw(st.sampled_from(["js", "traj", "array", "event"]))
+    if kind == "js":
+        msg = JointState(name=draw(_names), position=draw(_floats), velocity=draw(_floats),
+                         effort=draw(_floats))
+        msg.header.frame_id = draw(st.sampled_from(["", "a", "base_link"]))
+        return msg, "sensor_msgs/msg/JointState"
+    if kind == "traj":
+        points = [JointTrajectoryPoint(positions=draw(_floats), velocities=draw(_floats),
+                                       effort=draw(_floats)) for _ in range(draw(st.integers(0, 3)))]
+        return JointTrajectory(joint_names=draw(_names), points=points), "trajectory_msgs/msg/JointTrajectory"
+    if kind == "array":
+        return Float64MultiArray(data=draw(_floats)), "std_msgs/msg/Float64MultiArray"
+    value = ParameterValue(type=ParameterType.PARAMETER_INTEGER_ARRAY,
+                           integer_array_value=draw(st.lists(st.integers(-2**63, 2**63 - 1), max_size=3)))
+    event = ParameterEvent(node=draw(st.sampled_from(["/cpg", "/x"])),
+                           changed_parameters=[Parameter(name="p", value=value)])
+    return event, "rcl_interfaces/msg/ParameterEvent"
 
-    raw = _serialized(JointState(name=["a", "b"], position=[1.0, 2.0], velocity=[3.0, 4.0]))
-    msg = deserialize(typestore(), raw, "sensor_msgs/msg/JointState")
-    assert list(msg.name) == ["a", "b"] and list(msg.position) == [1.0, 2.0] and len(msg.effort) == 0
-    assert math.isfinite(sum(msg.velocity))
+
+@given(_fast_dds_messages())
+@settings(max_examples=40, deadline=None)
+def test_fast_dds_unset_end_bytes_are_cut(case):
+    """rclpy's serialize_message (Fast DDS's typesupport, as on the wire) sizes an empty float64/int64
+    sequence as if 8-aligned and leaves the difference unset after the last field; canonical_cdr cuts it
+    where rosbags' own deserializer ends, keeps every byte before, and stock rosbags then reads the
+    message, equal to what rclpy reads."""
+    from rclpy.serialization import deserialize_message
+
+    from cpg_walker.nodes.recording import canonical_cdr, cdr_end, typestore
+
+    msg, msgtype = case
+    store = typestore()
+    raw = _serialized(msg)
+    out = canonical_cdr(store, raw, msgtype)
+    msgdef = store.get_msgdef(msgtype)
+    end = 4 + msgdef.deserialize_cdr_le(raw[4:], 0, msgdef.cls, store)[1]
+    assert cdr_end(store, msgtype)(raw) == end
+    if len(raw) - end > 3:
+        assert out == raw[:end] + bytes(-end % 4)
+    else:
+        assert out is raw
+    assert canonical_cdr(store, out, msgtype) is out
+    theirs = deserialize_message(raw, type(msg))
+    ours = store.deserialize_cdr(out, msgtype)  # stock: at most 3 bytes after the last field
+    if msgtype == "sensor_msgs/msg/JointState":
+        assert (list(ours.name), ours.position.tolist(), ours.velocity.tolist(), ours.effort.tolist()) \
+            == (list(theirs.name), list(theirs.position), list(theirs.velocity), list(theirs.effort))
+    elif msgtype == "trajectory_msgs/msg/JointTrajectory":
+        assert [(p.positions.tolist(), p.velocities.tolist(), p.effort.tolist()) for p in ours.points] \
+            == [(list(p.positions), list(p.velocities), list(p.effort)) for p in theirs.points]
+    elif msgtype == "std_msgs/msg/Float64MultiArray":
+        assert ours.data.tolist() == list(theirs.data)
+    else:
+        assert ours.changed_parameters[0].value.integer_array_value.tolist() \
+            == list(theirs.changed_parameters[0].value.integer_array_value)
+
+
+def test_the_recorder_writes_what_stock_rosbags_reads(tmp_path):
+    """BagRecorder writes a /joint_targets- and a /joint_torques-like message (as Fast DDS sends them) that
+    rosbags' AnyReader.deserialize reads; a type that cannot carry the unset bytes is written byte for
+    byte as received, and read_topics reads a bag written before the cut (or by ``ros2 bag record``)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from sensor_msgs.msg import Imu, JointState
+
+    from cpg_walker.nodes.recording import BagRecorder, typestore
+
+    targets = _serialized(JointState(name=["a", "b"], position=[1.0, 2.0], velocity=[3.0, 4.0]))
+    torques = _serialized(JointState(name=["a", "b"], effort=[5.0, 6.0]))
+    imu = _serialized(Imu())
+    js = "sensor_msgs/msg/JointState"
+    with BagRecorder(tmp_path / "new") as bag:
+        for topic, msgtype in (("/joint_targets", js), ("/joint_torques", js),
+                               ("/imu", "sensor_msgs/msg/Imu")):
+            bag.add_topic(topic, msgtype)
+        for topic, raw in (("/joint_targets", targets), ("/joint_torques", torques), ("/imu", imu)):
+            bag.write(topic, raw)
+    with AnyReader([tmp_path / "new"]) as reader:
+        got = {c.topic: (raw, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages()}
+    assert got["/joint_targets"][1].position.tolist() == [1.0, 2.0]
+    assert got["/joint_torques"][1].effort.tolist() == [5.0, 6.0]
+    assert len(got["/joint_targets"][0]) == len(targets) - 4  # the 4 unset bytes after the empty effort
+    assert len(got["/joint_torques"][0]) == len(torques) - 8
+    assert got["/imu"][0] == imu
+    store = typestore()
+    old = Writer(tmp_path / "old", version=9, storage_plugin=StoragePlugin.MCAP)
+    old.open()
+    old.write(old.add_connection("/joint_torques", js, typestore=store), 1, torques)
+    old.close()
+    assert read_topics(tmp_path / "old")["/joint_torques"][0][1].effort.tolist() == [5.0, 6.0]
 
 
 def test_a_missing_bag_is_one_clear_error(tmp_path):

@@ -1,9 +1,11 @@
 """A recording of the ROS graph as one rosbag2 MCAP file (ROS 2 CDR), written with rosbags' rosbag2 Writer.
 
 ``BagRecorder`` takes the messages as the middleware delivered them (serialized CDR, never re-encoded),
-writes them as they come, and at ``close`` adds ``/tf`` and ``/tf_static`` computed from the simulation's
-exact poses: the MuJoCo model posed from each ``/odom/ground_truth`` (the floating base, double precision)
-and the ``/joint_states`` of the same stamp (every joint), its links' transforms from robot/frames.py.
+writes them as they come (without the unset bytes Fast DDS sends after some messages' last field:
+``canonical_cdr``, so that stock rosbags, mcap_ros2 and Foxglove all decode them), and at ``close``
+adds ``/tf`` and ``/tf_static`` computed from the simulation's exact poses: the MuJoCo model posed from
+each ``/odom/ground_truth`` (the floating base, double precision) and the ``/joint_states`` of the same
+stamp (every joint), its links' transforms from robot/frames.py.
 The bag directory is built in a hidden temporary directory and its two files (``recording.mcap`` and
 rosbag2's ``metadata.yaml``) are moved into the output directory when the bag is complete.
 
@@ -52,22 +54,121 @@ def cdr_stamp_ns(data: bytes | memoryview) -> int:
 
 
 def deserialize(store: Any, data: bytes | memoryview, msgtype: str) -> Any:
-    """A CDR message as rosbags' message object. Fast DDS (rmw_fastrtps, Jazzy) sizes its buffer with 4
-    bytes more for each empty sequence of 8-byte numbers and sends them too, unset (/joint_targets'
-    effort, /joint_torques' position and velocity: 4 or 8 bytes after the last field), which rosbags'
-    ``deserialize_cdr`` rejects (it allows 3); those messages are read with its generated deserializer
-    directly, allowing up to 15 bytes after the last field. The fields read are the same either way."""
-    from rosbags.serde import SerdeError
+    """A CDR message as rosbags' message object (``store.deserialize_cdr`` of its ``canonical_cdr``: a
+    recording of ``ros2 bag record``, or of this recorder before it trimmed, has Fast DDS's unset end
+    bytes, which rosbags rejects)."""
+    return store.deserialize_cdr(canonical_cdr(store, data, msgtype), msgtype)
 
+
+# ------------------------------------------------------------------------------------ canonical CDR
+# Fast DDS (rmw_fastrtps, Jazzy) sizes a message's buffer as if each EMPTY sequence of 8-byte numbers
+# (float64[], int64[], uint64[]) were aligned to 8 after its length, which its serializer does not do for
+# an empty one, and sends the whole buffer: 4 unset bytes (old memory) after the last field for each such
+# sequence that ends off the 8-byte grid (/joint_targets' empty effort: 4, /joint_torques' empty position
+# and velocity: 8). CDR readers stop at the last field; rosbags' deserialize_cdr also checks that no more
+# than 3 bytes (the end's 4-byte alignment) follow and rejects these messages. rclpy's serialize_message
+# writes the same bytes (same typesupport). The recorder cuts them: each message of a type with such a
+# sequence is walked to its last field (``cdr_end``: lengths only, nothing decoded) and written up to there,
+# zero-padded to 4 bytes, when more than 3 bytes follow; every byte it keeps is as received.
+
+_U32 = (struct.Struct(">I").unpack_from, struct.Struct("<I").unpack_from)  # by the encapsulation's LE bit
+_SIZES = {"bool": 1, "byte": 1, "char": 1, "int8": 1, "uint8": 1, "int16": 2, "uint16": 2, "int32": 4,
+          "uint32": 4, "float32": 4, "int64": 8, "uint64": 8, "float64": 8}
+
+
+def _walk_lines(store: Any, desc: tuple, lines: list[str], ind: str, depth: int) -> None:
+    """Python lines that advance ``p`` (offset in the CDR body) over one value of field type ``desc``
+    (rosbags' fielddefs: (Nodetype, ...)); KeyError for a type the walk does not know (wstring)."""
+    from rosbags.interfaces import Nodetype
+
+    kind, arg = desc
+    if kind == Nodetype.NAME:
+        for _, field in store.fielddefs[arg][1]:
+            _walk_lines(store, field, lines, ind, depth)
+    elif kind == Nodetype.BASE:
+        if arg[0] == "string":
+            lines += [f"{ind}p = (p + 3) & -4", f"{ind}p += 4 + u32(b, p + 4)[0]"]
+        else:
+            size = _SIZES[arg[0]]
+            lines += [f"{ind}p = (p + {size - 1}) & -{size}"] if size > 1 else []
+            lines += [f"{ind}p += {size}"]
+    else:  # ARRAY (fixed length) or SEQUENCE (uint32 length first)
+        (ekind, earg), length = arg
+        n = f"n{depth}"
+        if kind == Nodetype.SEQUENCE:
+            lines += [f"{ind}p = (p + 3) & -4", f"{ind}{n} = u32(b, p + 4)[0]", f"{ind}p += 4"]
+        else:
+            lines += [f"{ind}{n} = {length}"]
+        if ekind == Nodetype.BASE and earg[0] != "string":
+            size = _SIZES[earg[0]]
+            lines += [f"{ind}if {n}:", f"{ind}    p = ((p + {size - 1}) & -{size}) + {n} * {size}"]
+        else:
+            lines += [f"{ind}for _ in range({n}):"]
+            _walk_lines(store, (ekind, earg), lines, ind + "    ", depth + 1)
+
+
+def _has_long_sequence(store: Any, msgtype: str) -> bool:
+    """Whether ``msgtype`` has (at any depth) a sequence of 8-byte numbers: the messages Fast DDS can end
+    with unset bytes."""
+    from rosbags.interfaces import Nodetype
+
+    def walk(desc: tuple) -> bool:
+        kind, arg = desc
+        if kind == Nodetype.NAME:
+            return any(walk(f) for _, f in store.fielddefs[arg][1])
+        if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+            (ekind, earg), _ = arg
+            if kind == Nodetype.SEQUENCE and ekind == Nodetype.BASE and _SIZES.get(earg[0]) == 8:
+                return True
+            return walk((ekind, earg))
+        return False
+
+    return walk((Nodetype.NAME, msgtype))
+
+
+_ENDS: dict[tuple[int, str], tuple[Any, Any]] = {}  # (id(store), msgtype): (store, end)
+
+
+def cdr_end(store: Any, msgtype: str) -> Any:
+    """``end(data) -> offset`` just past the last field of a CDR message of ``msgtype`` (encapsulation
+    header included), for the types Fast DDS can end with unset bytes; None for the others (and for a type
+    with a wstring, which the walk does not know). Generated Python, like rosbags' own deserializers."""
+    from rosbags.interfaces import Nodetype
+
+    key = (id(store), msgtype)
+    if key not in _ENDS:
+        func = None
+        if _has_long_sequence(store, msgtype):
+            lines = ["def end(b):", "    u32 = U32[b[1] & 1]", "    p = 0"]
+            try:
+                _walk_lines(store, (Nodetype.NAME, msgtype), lines, "    ", 0)
+            except KeyError:
+                lines = []
+            if lines:
+                namespace: dict[str, Any] = {"U32": _U32}
+                exec("\n".join([*lines, "    return p + 4"]), namespace)
+                func = namespace["end"]
+        _ENDS[key] = (store, func)  # the store kept: its id is not reused while cached
+    return _ENDS[key][1]
+
+
+def canonical_cdr(store: Any, data: bytes | memoryview, msgtype: str) -> bytes | memoryview:
+    """``data`` without the unset bytes Fast DDS can send after the last field (more than the 0-3 bytes
+    of CDR's end alignment: cut there, zero-padded to 4 bytes); every other message unchanged (the same
+    object). A message shorter than its fields say (corrupt) is left as it is."""
+    return _trimmed(cdr_end(store, msgtype), data)
+
+
+def _trimmed(end: Any, data: bytes | memoryview) -> bytes | memoryview:
+    if end is None or len(data) < 8 or data[0] != 0 or data[1] > 1:  # plain CDR (XCDR1) BE/LE only
+        return data
     try:
-        return store.deserialize_cdr(data, msgtype)
-    except SerdeError:
-        msgdef = store.get_msgdef(msgtype)
-        func = msgdef.deserialize_cdr_le if data[1] & 1 else msgdef.deserialize_cdr_be
-        message, pos = func(data[4:], 0, msgdef.cls, store)
-        if len(data) - 4 - pos > 15:
-            raise
-        return message
+        n = end(data)
+    except (struct.error, IndexError):
+        return data
+    if len(data) - n <= 3 or n > len(data):
+        return data
+    return bytes(data[:n]) + bytes(-n % 4)
 
 
 def qos_of(profile: Any) -> Any:
@@ -100,6 +201,7 @@ class _Topic:
     connection: Any
     stamped: bool
     count: int = 0
+    end: Any = None  # cdr_end of its type: its messages are written without Fast DDS's unset end bytes
 
 
 class BagRecorder:
@@ -140,7 +242,7 @@ class BagRecorder:
         stamped = bool(fields) and fields[0][1][1] in _STAMPED_FIRST
         conn = self.writer.add_connection(topic, msgtype, typestore=self.store,
                                           offered_qos_profiles=list(offered_qos or []))
-        self.topics[topic] = _Topic(conn, stamped)
+        self.topics[topic] = _Topic(conn, stamped, end=cdr_end(self.store, msgtype))
         return None
 
     def log_time(self, topic: _Topic, data: bytes | memoryview) -> int:
@@ -154,9 +256,12 @@ class BagRecorder:
         return self.clock_ns
 
     def write(self, topic: str, data: bytes | memoryview) -> bool:
-        """One message of an added topic, serialized (CDR) as received; False if its bag time is past
-        ``until_ns`` (then it is not written)."""
+        """One message of an added topic, serialized (CDR) as received (``canonical_cdr``: without Fast
+        DDS's unset bytes after the last field); False if its bag time is past ``until_ns`` (then it is
+        not written)."""
         t = self.topics[topic]
+        if t.end is not None:
+            data = _trimmed(t.end, data)
         if topic == CLOCK_TOPIC:
             self.clock_ns = max(self.clock_ns, cdr_stamp_ns(data))
         ns = self.log_time(t, data)
