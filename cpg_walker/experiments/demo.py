@@ -29,6 +29,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from cpg_walker.errors import InputError
+
 #: (fraction of the walking time, zeta, alpha, what the robot does) - the run starts at zeta = alpha = 1.
 DEMO_SCHEDULE: tuple[tuple[float, float, float, str], ...] = (
     (0.12, 1.4, 1.0, "faster (zeta 1.4)"),
@@ -61,7 +63,7 @@ def demo_schedule(duration: float, start_s: float) -> list[tuple[float, float, f
     the run leaves less than MIN_WALK_S of walking."""
     walking = duration - start_s
     if not walking >= MIN_WALK_S - 1e-9:
-        raise ValueError(f"--duration {duration:g} s is too short: the CPG walks from {start_s:.2f} sim s "
+        raise InputError(f"--duration {duration:g} s is too short: the CPG walks from {start_s:.2f} sim s "
                          f"(after the recorded opening steps); use at least "
                          f"{math.ceil((start_s + MIN_WALK_S) * 10) / 10:g} s")
     return [(round(start_s + f * walking, 3), z, a) for f, z, a, _ in DEMO_SCHEDULE]
