@@ -105,6 +105,16 @@ def in_text_file(text: str) -> str:
     return text
 
 
+def config_or_file(text: str) -> str:
+    """A readable text file, or a bare file name in the package's config/ (the loaders accept both)."""
+    from cpg_walker.paths import share_dir
+
+    p = _path(text)
+    if not _exists(p) and len(p.parts) == 1 and (share_dir() / "config" / text).is_file():
+        return text
+    return in_text_file(text)
+
+
 def number(text: str, kind: type = float) -> float:
     """``text`` as a finite number of ``kind`` (float or int)."""
     try:

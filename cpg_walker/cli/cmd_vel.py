@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from cpg_walker.cli.checks import count, domain_id, in_text_file, out_dir, positive
+from cpg_walker.cli.checks import config_or_file, count, domain_id, out_dir, positive
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output directory (drive_check.json, .md, .png)")
     d.add_argument("--jobs", type=count, default=2, metavar="N", help="parallel walks (default 2)")
     d.add_argument("--quick", action="store_true", help="forward, backward, left, right only")
-    d.add_argument("--speed-map", default=None, type=in_text_file, metavar="FILE",
+    d.add_argument("--speed-map", default=None, type=config_or_file, metavar="FILE",
                    help="speed map (default: config/cpg.yaml's)")
     d.add_argument("--graph", action="store_true",
                    help="drive a graph started like `cpg-walker graph` (lockstep) by /cmd_vel instead, "
@@ -57,6 +57,10 @@ def _drive(args: argparse.Namespace) -> int:
         print(open(f"{args.out}/drive_graph.md", encoding="utf-8").read())
         return 1 if res["fell"] else 0
     from cpg_walker.experiments.cmd_vel import drive_check, drive_set
+    from cpg_walker.walker.cmd_vel import SpeedMap
+
+    if args.speed_map is not None:
+        SpeedMap.load(args.speed_map)  # InputError naming the file, before the drives
     from cpg_walker.progress import Progress
 
     prog = Progress(len(drive_set(args.quick)), "drive-check", "drives")

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from cpg_walker.cli.checks import count, in_text_file, non_negative, out_dir, positive, within
+from cpg_walker.cli.checks import config_or_file, count, non_negative, out_dir, positive, within
 from cpg_walker.errors import InputError
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
@@ -39,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="amplitude (step length) scale (default: cpg_node's, config/cpg.yaml)")
     p.add_argument("--oscillators", type=count, default=None, metavar="N",
                    help="oscillators per DOF (learns now unless config/cpg_humanoid.yaml has this N)")
-    p.add_argument("--cpg", default=None, type=in_text_file, metavar="FILE",
+    p.add_argument("--cpg", default=None, type=config_or_file, metavar="FILE",
                    help="learned CPG YAML (default: cpg_node's cpg_file, config/cpg.yaml)")
     p.add_argument("--transition", choices=("recording", "standing"), default="recording",
                    help="start-up: recorded opening steps then hand-over (default), or fade in from standing")

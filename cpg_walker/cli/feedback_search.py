@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 
-from cpg_walker.cli.checks import at_least, count, in_text_file, out_dir
+from cpg_walker.cli.checks import at_least, count, in_text_file, out_dir, within
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--generations", type=count, default=None, metavar="G", help="total generations (YAML's)")
     p.add_argument("--popsize", type=at_least(2, int), default=None, metavar="P",
                    help="candidates per generation")
-    p.add_argument("--seed", type=int, default=1, metavar="S", help="CMA-ES seed (default 1)")
+    p.add_argument("--seed", type=within(0, 2**32 - 1, int), default=1, metavar="S",
+                   help="CMA-ES seed (default 1)")
     p.add_argument("--jobs", type=count, default=None, metavar="N",
                    help="parallel walks (default: every core)")
     p.add_argument("--resume", action="store_true", help="continue the search saved in DIR")

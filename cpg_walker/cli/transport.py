@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from cpg_walker.cli.checks import number, out_dir, positive
+from cpg_walker.cli.checks import number, out_dir, positive, within
 from cpg_walker.errors import InputError
 
 
@@ -43,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--delays-ms", type=_floats, default=[d * 1e3 for d in t.DELAYS_S], metavar="D,D",
                    help="delays (ms) tried in order, jitter half of each (default "
                         f"{','.join(f'{d * 1e3:g}' for d in t.DELAYS_S)})")
-    p.add_argument("--seed", type=int, default=1, help="relay_node's seed (default 1)")
+    p.add_argument("--seed", type=within(0, 2**32 - 1, int), default=1, help="relay_node's seed (default 1)")
     p.set_defaults(func=_run)
 
 

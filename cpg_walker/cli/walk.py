@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from cpg_walker.cli.checks import in_text_file, out_dir, positive, within
+from cpg_walker.cli.checks import config_or_file, out_dir, positive, within
 from cpg_walker.cli.graph import add_foxglove_option
 from cpg_walker.nodes.runtime import PACINGS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
@@ -16,7 +16,7 @@ from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
 def _cpg_file(text: str) -> str:
     """``--cpg-file``: a readable YAML file, or '' (cpg_node learns it)."""
-    return text if text == "" else in_text_file(text)
+    return text if text == "" else config_or_file(text)
 
 
 def register(sub: argparse._SubParsersAction) -> None:

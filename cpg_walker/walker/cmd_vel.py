@@ -42,7 +42,7 @@ LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand
 def _read_yaml(path: str | Path | None, default: str) -> tuple[dict, Path]:
     import yaml
 
-    from cpg_walker.paths import config_path
+    from cpg_walker.paths import config_path, yaml_error
 
     p = Path(path) if path else config_path(default)
     if not p.is_file() and path and not Path(path).is_absolute():
@@ -51,9 +51,12 @@ def _read_yaml(path: str | Path | None, default: str) -> tuple[dict, Path]:
         except FileNotFoundError:
             pass
     if not p.is_file():
-        raise FileNotFoundError(f"speed map file not found: {path}")
+        raise InputError(f"speed map file not found: {path}")
     with open(p, encoding="utf-8") as fh:
-        d = yaml.safe_load(fh) or {}
+        try:
+            d = yaml.safe_load(fh) or {}
+        except yaml.YAMLError as exc:
+            raise InputError(yaml_error(p, exc)) from None
     if not isinstance(d, dict):
         raise InputError(f"{p}: expected a mapping")
     return d, p
