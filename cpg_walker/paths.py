@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from cpg_walker.errors import InputError
+
 PACKAGE = "cpg_walker"
 _REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -63,11 +65,11 @@ def ros_parameters(file: str | Path, node: str) -> dict:
         try:
             doc = yaml.safe_load(fh)
         except yaml.YAMLError as exc:
-            raise ValueError(yaml_error(path, exc)) from None
+            raise InputError(yaml_error(path, exc)) from None
     section = doc.get(node) if isinstance(doc, dict) else None
     params = section.get("ros__parameters") if isinstance(section, dict) else None
     if not isinstance(params, dict):
-        raise ValueError(f"{path}: expected '{node}: ros__parameters: {{...}}' (a ROS 2 parameters file)")
+        raise InputError(f"{path}: expected '{node}: ros__parameters: {{...}}' (a ROS 2 parameters file)")
     flat: dict = {}
 
     def walk(prefix: str, value: object) -> None:

@@ -57,7 +57,7 @@ def test_fit_missing_column_and_zero_oscillators(tmp_path, capsys):
     assert main(["fit", "--csv", str(tmp_path / "s.csv"), "--column", "nope", "--out", str(tmp_path)]) == 2
     assert "no column named 'nope'" in capsys.readouterr().err
     assert main(["fit", "--csv", str(tmp_path / "s.csv"), "--oscillators", "0", "--out", str(tmp_path)]) == 2
-    assert "--oscillators must be >= 1" in capsys.readouterr().err
+    assert "argument --oscillators: must be >= 1" in capsys.readouterr().err
 
 
 @pytest.mark.slow

@@ -1,8 +1,9 @@
 """The package's layers import only downward: every edge between its parts is named here.
 
-Bottom up: ``paths``/``progress`` (utilities) → ``cpg`` (the generic CPG) → ``robot`` (the HOAP-2 model,
-PID law, contact) → ``walker`` (the HOAP-2 controller: cpg × robot, no ROS) → ``nodes`` (rclpy nodes and
-the graph tools) → ``experiments`` → ``cli``. An import not in ALLOWED fails, naming file and line.
+Bottom up: ``errors``/``paths``/``progress`` (utilities) → ``cpg`` (the generic CPG) → ``robot`` (the
+HOAP-2 model, PID law, contact) → ``walker`` (the HOAP-2 controller: cpg × robot, no ROS) → ``nodes``
+(rclpy nodes and the graph tools) → ``experiments`` → ``cli``. An import not in ALLOWED fails, naming file
+and line.
 """
 
 from __future__ import annotations
@@ -17,14 +18,15 @@ PACKAGE = Path(__file__).resolve().parent.parent / "cpg_walker"
 #: part -> the parts it may import (besides itself). Nothing may import ``cli`` or ``experiments``
 #: except those above them.
 ALLOWED: dict[str, set[str]] = {
-    "paths": set(),
+    "errors": set(),
+    "paths": {"errors"},
     "progress": set(),
     "cpg": set(),
-    "robot": {"paths"},
-    "walker": {"paths", "cpg", "robot"},
-    "nodes": {"paths", "cpg", "robot", "walker"},
-    "experiments": {"paths", "progress", "cpg", "robot", "walker", "nodes"},
-    "cli": {"paths", "progress", "cpg", "robot", "walker", "nodes", "experiments"},
+    "robot": {"errors", "paths"},
+    "walker": {"errors", "paths", "cpg", "robot"},
+    "nodes": {"errors", "paths", "cpg", "robot", "walker"},
+    "experiments": {"errors", "paths", "progress", "cpg", "robot", "walker", "nodes"},
+    "cli": {"errors", "paths", "progress", "cpg", "robot", "walker", "nodes", "experiments"},
     "__init__": set(),
 }
 #: third-party roots a part must not import (the pure layers stay free of ROS).

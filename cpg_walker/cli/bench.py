@@ -5,32 +5,71 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import in_text_file, out_dir
+from cpg_walker.errors import InputError
+from cpg_walker.experiments.bench import SECTIONS
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="run the benchmarks; write bench.json, bench.md, tables, plots")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
     p.add_argument(
-        "--only", action="append", default=None, metavar="SECTION",
+        "--only", action="append", default=None, metavar="SECTION", choices=list(SECTIONS),
         help="run only this section (repeatable); default: all",
     )
     p.add_argument("--quick", action="store_true", help="fewer repetitions (for smoke tests)")
-    p.add_argument("--readme", default=None, metavar="FILE",
+    p.add_argument("--readme", default=None, type=in_text_file, metavar="FILE",
                    help="also write the summary tables into FILE's generated benchmark block (README.md)")
-    p.add_argument("--from-json", default=None, metavar="BENCH_JSON",
+    p.add_argument("--from-json", default=None, type=in_text_file, metavar="BENCH_JSON",
                    help="run nothing: regenerate the tables and plots (and --readme) from this bench.json")
     p.set_defaults(func=_run)
 
 
+def read_results(path: str) -> dict:
+    """bench.json's results: a JSON object with a ``machine`` object and at least one section object;
+    InputError naming the file (and the line of a JSON syntax error) otherwise."""
+    import json
+    from pathlib import Path
+
+    try:
+        results = json.loads(Path(path).read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}:{exc.lineno}:{exc.colno}: not valid JSON: {exc.msg}") from None
+    if not isinstance(results, dict):
+        raise InputError(f"{path}: expected a JSON object (bench.json), got a {type(results).__name__}")
+    if not isinstance(results.get("machine"), dict):
+        raise InputError(f"{path}: no 'machine' object: not a bench.json")
+    bad = [name for name in SECTIONS if name in results and not isinstance(results[name], dict)]
+    if bad:
+        raise InputError(f"{path}: section(s) {bad} must be JSON objects")
+    if not any(name in results for name in SECTIONS):
+        raise InputError(f"{path}: no benchmark section (expected one or more of {', '.join(SECTIONS)})")
+    return results
+
+
+def _check_readme(path: str) -> None:
+    """--readme must hold the generated block's markers (it is replaced at the end of the run)."""
+    from pathlib import Path
+
+    from cpg_walker.experiments.bench_report import BEGIN, END
+
+    text = Path(path).read_text(encoding="utf-8")
+    if BEGIN not in text or END not in text[text.find(BEGIN):]:
+        raise InputError(f"--readme {path}: no '{BEGIN}' ... '{END}' block to replace")
+
+
 def _run(args: argparse.Namespace) -> int:
+    if args.readme is not None:
+        _check_readme(args.readme)
     if args.from_json:
-        import json
         from pathlib import Path
 
         from cpg_walker.experiments.bench_report import write
 
+        results = read_results(args.from_json)
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
-        write(json.loads(Path(args.from_json).read_text()), out, args.readme)
+        write(results, out, args.readme)
         return 0
     from cpg_walker.experiments.bench import run_benchmarks
 

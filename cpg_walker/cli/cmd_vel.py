@@ -6,26 +6,32 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import config_or_file, count, domain_id, out_dir, positive
 from cpg_walker.cli.outcome import fall_line, report_fall
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("cmd-vel-map", help="measure /cmd_vel's speed vs zeta/alpha map (in-process)")
-    p.add_argument("--out", required=True, help="output directory (speed_map.yaml, speed_map.json)")
-    p.add_argument("--jobs", type=int, default=2, metavar="N", help="parallel walks (default 2)")
-    p.add_argument("--window", type=float, default=30.0, metavar="S", help="sim s walked after the command")
+    p.add_argument("--out", required=True, type=out_dir,
+                   help="output directory (speed_map.yaml, speed_map.json)")
+    p.add_argument("--jobs", type=count, default=2, metavar="N", help="parallel walks (default 2)")
+    p.add_argument("--window", type=positive, default=30.0, metavar="S",
+                   help="sim s walked after the command")
     p.set_defaults(func=_map)
     d = sub.add_parser("drive-check", help="/cmd_vel commanded vs actual speed and turn rate: table + plot")
-    d.add_argument("--out", required=True, help="output directory (drive_check.json, .md, .png)")
-    d.add_argument("--jobs", type=int, default=2, metavar="N", help="parallel walks (default 2)")
+    d.add_argument("--out", required=True, type=out_dir,
+                   help="output directory (drive_check.json, .md, .png)")
+    d.add_argument("--jobs", type=count, default=2, metavar="N", help="parallel walks (default 2)")
     d.add_argument("--quick", action="store_true", help="forward, backward, left, right only")
-    d.add_argument("--speed-map", default=None, metavar="FILE", help="speed map (default: config/cpg.yaml's)")
+    d.add_argument("--speed-map", default=None, type=config_or_file, metavar="FILE",
+                   help="speed map (default: config/cpg.yaml's)")
     d.add_argument("--graph", action="store_true",
                    help="drive a graph started like `cpg-walker graph` (lockstep) by /cmd_vel instead, "
                         "measured from /odom/ground_truth: DIR/drive_graph.json, .md")
     d.add_argument("--attach", action="store_true",
                    help="with --graph: drive the graph already running on --domain-id (or ROS_DOMAIN_ID)")
-    d.add_argument("--domain-id", type=int, default=None, metavar="N", help="with --graph: the DDS domain")
+    d.add_argument("--domain-id", type=domain_id, default=None, metavar="N",
+                   help="with --graph: the DDS domain")
     d.set_defaults(func=_drive)
 
 
@@ -41,6 +47,10 @@ def _map(args: argparse.Namespace) -> int:
 
 
 def _drive(args: argparse.Namespace) -> int:
+    if args.graph and args.attach and args.domain_id is None:
+        from cpg_walker.nodes.graph import env_domain_id
+
+        env_domain_id()  # InputError when ROS_DOMAIN_ID is not a domain
     if args.graph:
         from cpg_walker.experiments.cmd_vel_graph import drive_graph
 
@@ -49,6 +59,10 @@ def _drive(args: argparse.Namespace) -> int:
         return report_fall("drive-check", [fall_line("drive-check", res.get("fell_at_s"),
                                                      what="driven through the graph")] if res["fell"] else [])
     from cpg_walker.experiments.cmd_vel import drive_check, drive_set
+    from cpg_walker.walker.cmd_vel import SpeedMap
+
+    if args.speed_map is not None:
+        SpeedMap.load(args.speed_map)  # InputError naming the file, before the drives
     from cpg_walker.progress import Progress
 
     prog = Progress(len(drive_set(args.quick)), "drive-check", "drives")

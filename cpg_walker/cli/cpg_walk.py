@@ -6,36 +6,45 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import config_or_file, count, non_negative, out_dir, positive, within
 from cpg_walker.cli.outcome import walk_status
+from cpg_walker.errors import InputError
+from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
 
 def _schedule(text: str) -> list[tuple[float, float, float]]:
+    """``--schedule``: "T,Z,A;..." with T >= 0 sim s and zeta, alpha in their ranges."""
     out = []
     for item in text.split(";"):
         if not item.strip():
             continue
         parts = item.split(",")
         if len(parts) != 3:
-            raise ValueError(f"--schedule item {item!r}: expected 'time,zeta,alpha'")
-        out.append(tuple(float(x) for x in parts))
+            raise argparse.ArgumentTypeError(f"item {item!r}: expected 'time,zeta,alpha'")
+        try:
+            t, z, a = (check(x) for check, x in zip(
+                (non_negative, within(*ZETA_RANGE), within(*ALPHA_RANGE)), parts, strict=True))
+        except argparse.ArgumentTypeError as exc:
+            raise argparse.ArgumentTypeError(f"item {item!r}: {exc}") from None
+        out.append((t, z, a))
     return out
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("cpg-walk", help="in-process walk driven by the learned humanoid CPG; walk.json")
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--duration", type=float, default=60.0, metavar="S", help="sim seconds (default 60)")
-    p.add_argument("--zeta", type=float, default=None,
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
+    p.add_argument("--duration", type=positive, default=60.0, metavar="S", help="sim seconds (default 60)")
+    p.add_argument("--zeta", type=within(*ZETA_RANGE), default=None,
                    help="frequency ratio (negative = backwards; default: cpg_node's, config/cpg.yaml)")
-    p.add_argument("--alpha", type=float, default=None,
+    p.add_argument("--alpha", type=within(*ALPHA_RANGE), default=None,
                    help="amplitude (step length) scale (default: cpg_node's, config/cpg.yaml)")
-    p.add_argument("--oscillators", type=int, default=None, metavar="N",
+    p.add_argument("--oscillators", type=count, default=None, metavar="N",
                    help="oscillators per DOF (learns now unless config/cpg_humanoid.yaml has this N)")
-    p.add_argument("--cpg", default=None, metavar="FILE",
+    p.add_argument("--cpg", default=None, type=config_or_file, metavar="FILE",
                    help="learned CPG YAML (default: cpg_node's cpg_file, config/cpg.yaml)")
     p.add_argument("--transition", choices=("recording", "standing"), default="recording",
                    help="start-up: recorded opening steps then hand-over (default), or fade in from standing")
-    p.add_argument("--blend", type=float, default=1.0, metavar="S", help="hand-over cross-fade (s)")
+    p.add_argument("--blend", type=non_negative, default=1.0, metavar="S", help="hand-over cross-fade (s)")
     p.add_argument("--schedule", type=_schedule, default=None, metavar="T,Z,A;...",
                    help="commands (time, zeta, alpha) applied during the walk")
     p.add_argument("--feedback", choices=("on", "off"), default="off",
@@ -57,6 +66,10 @@ def _run(args: argparse.Namespace) -> int:
         os.environ.setdefault("MUJOCO_GL", "egl")
     from cpg_walker.experiments.cpg_walk import run_cpg_walk
 
+    if args.pathways is not None:
+        from cpg_walker.walker.feedback import check_pathways
+
+        check_pathways(tuple(p.strip() for p in args.pathways.split(",") if p.strip()))
     pathways = None
     if args.feedback == "on":
         from cpg_walker.walker.feedback import default_pathways
@@ -67,11 +80,18 @@ def _run(args: argparse.Namespace) -> int:
     for item in args.set:
         key, sep, value = item.partition("=")
         if not sep:
-            raise ValueError(f"--set {item!r}: expected FIELD=VALUE")
+            raise InputError(f"--set {item!r}: expected FIELD=VALUE")
         try:
             overrides[key.strip()] = float(value)
         except ValueError:  # the string fields (lateral_mode, heading_reference)
             overrides[key.strip()] = value.strip()
+    if overrides:
+        from cpg_walker.walker.feedback import FeedbackConfig
+
+        try:
+            FeedbackConfig.load(**overrides)  # a bad field or value, before the walk
+        except InputError as exc:
+            raise InputError(f"--set: {exc}") from None
     m = run_cpg_walk(args.out, args.duration, args.zeta, args.alpha, args.oscillators, args.cpg,
                      args.transition, args.blend, args.schedule, render=not args.no_render, pathways=pathways,
                      feedback_overrides=overrides)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import domain_id, out_dir, positive
 from cpg_walker.cli.graph import add_foxglove_option
 from cpg_walker.cli.outcome import OK, walk_status
 from cpg_walker.nodes.runtime import PACINGS
@@ -18,13 +19,13 @@ from cpg_walker.nodes.runtime import PACINGS
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="the main job: a walk through the ROS graph with zeta/alpha changes, "
                                     "recorded, plotted and filmed (what `make demo` runs)")
-    p.add_argument("--out", default="results", help="output directory (default: results)")
-    p.add_argument("--duration", type=float, default=60.0, metavar="S",
+    p.add_argument("--out", default="results", type=out_dir, help="output directory (default: results)")
+    p.add_argument("--duration", type=positive, default=60.0, metavar="S",
                    help="sim seconds of the walk (default 60); the zeta/alpha changes are spread over it")
     p.add_argument("--pacing", choices=PACINGS, default="lockstep",
                    help="the sim node's pacing (default lockstep: deterministic, safe on a loaded machine; "
                         "realtime: at wall-clock speed, to watch)")
-    p.add_argument("--domain-id", type=int, default=None, metavar="N",
+    p.add_argument("--domain-id", type=domain_id, default=None, metavar="N",
                    help="DDS domain (default: ROS_DOMAIN_ID if set, else a free one in 1..101)")
     p.add_argument("--paper", action="store_true",
                    help="also run the paper's Section II experiment and the CPG learning (Fig. 6) first, "
@@ -42,8 +43,6 @@ def _run(args: argparse.Namespace) -> int:
     from cpg_walker.experiments.demo import run_demo
     from cpg_walker.nodes.graph_runner import resolve_domain
 
-    if not (args.duration > 0):
-        raise ValueError(f"--duration must be a positive number of sim seconds, got {args.duration}")
     domain, how = resolve_domain(args.domain_id)
     if args.paper:
         from pathlib import Path

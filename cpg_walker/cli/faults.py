@@ -6,21 +6,35 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import non_negative, out_dir, positive, within
 from cpg_walker.cli.outcome import fall_line, report_fall
+from cpg_walker.walker.controller import ZETA_RANGE
+
+
+def _nodes(text: str) -> str:
+    """``--nodes``: one or more of FAULT_ORDER, comma-separated."""
+    from cpg_walker.experiments.faults import FAULT_ORDER
+
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    bad = [n for n in names if n not in FAULT_ORDER]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(f"expected nodes among {','.join(FAULT_ORDER)}, got {text!r}")
+    return text
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     from cpg_walker.experiments.faults import FAULT_ORDER
 
     p = sub.add_parser("faults", help="kill and restart each graph node while walking; faults.json + table")
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--zeta", type=float, default=1.0, help="frequency ratio to walk at (default 1)")
-    p.add_argument("--warm", type=float, default=14.0, metavar="S",
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
+    p.add_argument("--zeta", type=within(*ZETA_RANGE), default=1.0,
+                   help="frequency ratio to walk at (default 1)")
+    p.add_argument("--warm", type=non_negative, default=14.0, metavar="S",
                    help="sim s of walking before the first fault (default 14)")
-    p.add_argument("--away", type=float, default=None, metavar="S",
+    p.add_argument("--away", type=positive, default=None, metavar="S",
                    help="wall s between killing a node and starting it again (default 2; with --in-process: "
                         "sim s the PID is lost, default 3)")
-    p.add_argument("--nodes", default=",".join(FAULT_ORDER), metavar="A,B",
+    p.add_argument("--nodes", default=",".join(FAULT_ORDER), type=_nodes, metavar="A,B",
                    help=f"nodes to kill, in order (default {','.join(FAULT_ORDER)})")
     p.add_argument("--in-process", action="store_true",
                    help="instead: the PID lost for --away sim s at 11 phases of a stride, "

@@ -14,18 +14,24 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import at_least, count, in_text_file, out_dir, within
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("feedback-search", help="CMA-ES search of the feedback gains; trials.jsonl, best.yaml",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", required=True, help="output directory (holds the resumable state)")
-    p.add_argument("--generations", type=int, default=None, metavar="G", help="total generations (YAML's)")
-    p.add_argument("--popsize", type=int, default=None, metavar="P", help="candidates per generation")
-    p.add_argument("--seed", type=int, default=1, metavar="S", help="CMA-ES seed (default 1)")
-    p.add_argument("--jobs", type=int, default=None, metavar="N", help="parallel walks (default: every core)")
+    p.add_argument("--out", required=True, type=out_dir, help="output directory (holds the resumable state)")
+    p.add_argument("--generations", type=count, default=None, metavar="G", help="total generations (YAML's)")
+    p.add_argument("--popsize", type=at_least(2, int), default=None, metavar="P",
+                   help="candidates per generation")
+    p.add_argument("--seed", type=within(0, 2**32 - 1, int), default=1, metavar="S",
+                   help="CMA-ES seed (default 1)")
+    p.add_argument("--jobs", type=count, default=None, metavar="N",
+                   help="parallel walks (default: every core)")
     p.add_argument("--resume", action="store_true", help="continue the search saved in DIR")
     p.add_argument("--quick", action="store_true", help="short scenarios (the YAML's quick: section)")
-    p.add_argument("--config", default=None, metavar="FILE", help="default config/feedback_search.yaml")
+    p.add_argument("--config", default=None, type=in_text_file, metavar="FILE",
+                   help="default config/feedback_search.yaml")
     p.add_argument("--holdout", action="store_true",
                    help="after the search (or alone, with DIR/best.yaml from an earlier one) judge the best "
                         "on held-out conditions")

@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import count, out_dir
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("learn", help="learn the 10-DOF humanoid CPG from the recorded walk; Fig 6")
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--oscillators", type=int, default=None, metavar="N",
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
+    p.add_argument("--oscillators", type=count, default=None, metavar="N",
                    help="oscillators per DOF (default: config/cpg_humanoid_learning.yaml)")
     p.add_argument("--install", action="store_true",
                    help="also replace the packaged config/cpg_humanoid.yaml (cpg_node's default file)")
@@ -24,8 +26,6 @@ def _run(args: argparse.Namespace) -> int:
 
     from cpg_walker.experiments.learn import run_learn
 
-    if args.oscillators is not None and args.oscillators < 1:
-        raise ValueError(f"--oscillators must be >= 1, got {args.oscillators}")
     r = run_learn(args.out, args.oscillators, install=args.install)
     keys = ("gait_frequency_hz", "recorded_gait_frequency_hz", "max_rms_error_deg", "n_oscillators",
             "converged", "strides_learned", "learning_wall_time_s")

@@ -9,6 +9,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from typing import NoReturn
+
+from cpg_walker.errors import InputError
 
 
 def command_modules() -> list[str]:
@@ -20,15 +23,26 @@ def command_modules() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(package.__path__) if m.name not in _NOT_COMMANDS)
 
 
-_NOT_COMMANDS = {"main", "outcome", "progress"}
+_NOT_COMMANDS = {"main", "outcome", "progress", "checks"}
+
+#: The old name of the input-error exception (cpg_walker.errors.InputError).
+UserError = InputError
 
 
-class UserError(Exception):
-    """A problem with the user's input: printed as one clear line, exit status 2, no traceback."""
+class OneLineParser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line on stderr (``PROG: error: ...``, no usage), status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {one_line(message)}\n")
+
+
+def one_line(text: str) -> str:
+    """``text``'s lines joined by '; ' (an error message is one line)."""
+    return "; ".join(line.strip() for line in str(text).splitlines() if line.strip()) or "(no message)"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="cpg-walker",
         description="Programmable CPGs (Righetti & Ijspeert) driving a simulated HOAP-2 humanoid.",
     )
@@ -41,17 +55,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run one sub-command; returns its exit status. Bad input (argparse's checks, InputError) is one line
+    on stderr and status 2; any other exception is a bug and propagates with its traceback."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # argparse: --help (0) or a bad argument (2, its one line printed)
+        return exc.code if isinstance(exc.code, int) else 2
     try:
         return int(args.func(args) or 0)
-    except UserError as exc:
-        print(f"cpg-walker {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except ValueError as exc:  # the core's validation errors (bad data, bad parameters) are user errors
-        print(f"cpg-walker {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except FileNotFoundError as exc:
-        print(f"cpg-walker {args.command}: error: {exc}", file=sys.stderr)
+    except InputError as exc:
+        print(f"cpg-walker {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

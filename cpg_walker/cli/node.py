@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from cpg_walker.cli.checks import non_negative
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("node", help="list the running nodes, or one node's endpoints (like `ros2 node`)",
@@ -14,14 +16,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     q = ps.add_parser("list", help="fully qualified node names, sorted")
     q.add_argument("-a", "--all", action="store_true", help="hidden nodes (names starting with _) as well")
     q.add_argument("-c", "--count-nodes", action="store_true", help="only the number of nodes")
-    q.add_argument("--wait", type=float, default=5.0, metavar="S",
+    q.add_argument("--wait", type=non_negative, default=5.0, metavar="S",
                    help="at most S seconds of discovery (default 5)")
     q.set_defaults(func=_list)
     q = ps.add_parser("info", help="a node's subscribers, publishers, services and actions")
     q.add_argument("node", metavar="NODE", help="node name, e.g. /cpg")
     q.add_argument("--include-hidden", action="store_true",
                    help="hidden topics, services and actions as well")
-    q.add_argument("--timeout", type=float, default=10.0, metavar="S",
+    q.add_argument("--timeout", type=non_negative, default=10.0, metavar="S",
                    help="seconds to wait for the node to be discovered (default 10)")
     q.set_defaults(func=_info)
 

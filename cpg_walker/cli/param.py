@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from cpg_walker.cli.checks import non_negative
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("param", help="list/get/set/describe/dump a running node's parameters (like `ros2 "
@@ -27,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             q.add_argument("names", metavar="NAME", nargs="+", help="parameter names, e.g. zeta alpha")
         if verb == "set":
             q.add_argument("value", metavar="VALUE", help="e.g. 0.8, 1, true, '[1.0, 2.0]', text")
-        q.add_argument("--timeout", type=float, default=10.0, metavar="S",
+        q.add_argument("--timeout", type=non_negative, default=10.0, metavar="S",
                        help="seconds to wait for the node (default 10)")
         q.set_defaults(func=_run)
 

@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import in_path, out_dir
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plot", help="plot a recording (DIR/recording.mcap) to PNGs")
-    p.add_argument("bag", metavar="BAG", help="the recording: its directory or its .mcap file")
-    p.add_argument("--out", required=True, metavar="DIR", help="where the PNGs go")
+    p.add_argument("bag", metavar="BAG", type=in_path, help="the recording: its directory or its .mcap file")
+    p.add_argument("--out", required=True, type=out_dir, metavar="DIR", help="where the PNGs go")
     p.set_defaults(func=_run)
 
 

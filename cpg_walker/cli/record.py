@@ -6,11 +6,14 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import non_negative, out_dir
+from cpg_walker.errors import InputError
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("record", help="record a running graph to DIR/recording.mcap (rosbag2 MCAP)")
-    p.add_argument("--out", required=True, metavar="DIR", help="directory of the bag")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--out", required=True, type=out_dir, metavar="DIR", help="directory of the bag")
+    p.add_argument("--duration", type=non_negative, default=None, metavar="S",
                    help="seconds of sim time to record, from the first /clock received (default: the "
                         "recorder's, config/recorder.yaml: until Ctrl-C)")
     p.add_argument("--wall-time", action="store_true",
@@ -26,7 +29,7 @@ def recorder_argv(out: str, duration: float | None, wall_time: bool) -> list[str
     from cpg_walker.nodes.runtime import params_file
 
     if duration is not None and not (duration >= 0 and math.isfinite(duration)):
-        raise ValueError(f"--duration must be >= 0 seconds (0: until Ctrl-C), got {duration}")
+        raise InputError(f"--duration must be >= 0 seconds (0: until Ctrl-C), got {duration}")
     params = {"use_sim_time": not wall_time, "out_dir": out}
     if duration is not None:
         params["duration"] = float(duration)
@@ -39,6 +42,9 @@ def recorder_argv(out: str, duration: float | None, wall_time: bool) -> list[str
 def _run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from cpg_walker.nodes.graph import env_domain_id
     from cpg_walker.nodes.recorder_node import main
+
+    env_domain_id()  # InputError when ROS_DOMAIN_ID is not a domain
 
     return main(recorder_argv(str(Path(args.out).resolve()), args.duration, args.wall_time))

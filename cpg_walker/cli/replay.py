@@ -5,17 +5,25 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import in_text_file, out_dir, positive
 from cpg_walker.cli.outcome import walk_status
+
+
+def _data(text: str) -> str:
+    """``--data``: a packaged gait's name or a readable CSV."""
+    from cpg_walker.robot.gait_data import PACKAGED
+
+    return text if text in PACKAGED else in_text_file(text)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="replay a recorded gait on the simulated HOAP-2; write replay.json")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
     p.add_argument("--gait", choices=("walk", "slow"), default="walk",
                    help="packaged recording (default walk)")
-    p.add_argument("--data", default=None, metavar="FILE",
+    p.add_argument("--data", default=None, type=_data, metavar="FILE",
                    help="a CSV in the packaged layout instead of --gait")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--duration", type=positive, default=None, metavar="S",
                    help="sim seconds (default: the recording, then its steady cycle repeated, to 30 s)")
     p.add_argument("--no-render", action="store_true", help="skip the filmstrip and GIF")
     p.add_argument("--graph", action="store_true",

@@ -8,14 +8,17 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import at_least, in_text_file, out_dir
 from cpg_walker.cli.outcome import fall_line, report_fall
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("results", help="regenerate the README's locomotion results (headline.json/.md)")
-    p.add_argument("--out", default="docs/results", help="output directory (default docs/results)")
-    p.add_argument("--jobs", type=int, default=None, metavar="N", help="parallel walks (default: every core)")
-    p.add_argument("--readme", default=None, metavar="FILE",
+    p.add_argument("--out", default="docs/results", type=out_dir,
+                   help="output directory (default docs/results)")
+    p.add_argument("--jobs", type=at_least(1, int), default=None, metavar="N",
+                   help="parallel walks (default: every core)")
+    p.add_argument("--readme", default=None, type=in_text_file, metavar="FILE",
                    help="also write the table into FILE's generated results block (README.md)")
     p.set_defaults(func=_run)
 
@@ -29,6 +32,12 @@ def _run(args: argparse.Namespace) -> int:
     from cpg_walker.experiments.provenance import provenance
     from cpg_walker.progress import Progress
 
+    if args.readme is not None:
+        from cpg_walker.errors import InputError
+        from cpg_walker.experiments.readme_blocks import read_block
+
+        if read_block(open(args.readme, encoding="utf-8").read(), "results-table") is None:
+            raise InputError(f"--readme {args.readme}: no '<!-- results-table:begin -->' block to replace")
     command = "cpg-walker " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:] else \
         "cpg-walker results"
     doc = {"provenance": provenance(command)}

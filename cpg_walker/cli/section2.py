@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from cpg_walker.cli.checks import out_dir
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("section2", help="paper Section II: learn Fig 2's signal, perturb/modulate (Fig 3)")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
     p.set_defaults(func=lambda args: run_section2(Path(args.out)))
 
 

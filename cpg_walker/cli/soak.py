@@ -6,14 +6,15 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import out_dir, positive
 from cpg_walker.cli.outcome import OK, fall_line, report_fall
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("soak", help="walk the graph for minutes with changes every 20 s; memory, overruns")
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--minutes", type=float, default=10.0, help="sim minutes to walk (default 10)")
-    p.add_argument("--period", type=float, default=20.0, metavar="S",
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
+    p.add_argument("--minutes", type=positive, default=10.0, help="sim minutes to walk (default 10)")
+    p.add_argument("--period", type=positive, default=20.0, metavar="S",
                    help="sim s between changes (default 20)")
     p.add_argument("--pacing", choices=("realtime", "lockstep"), default="realtime",
                    help="the sim's pacing (default realtime; lockstep: the same run whatever the load)")

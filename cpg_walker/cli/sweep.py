@@ -6,15 +6,19 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import count, in_text_file, out_dir, positive
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("sweep", help="zeta x feedback x start sweep, alpha, pushes, Fig. 8; JSON + MD + PNG")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
     p.add_argument("--quick", action="store_true", help="the small subset (config/sweep.yaml's quick:)")
-    p.add_argument("--jobs", type=int, default=None, metavar="N", help="parallel walks (default: every core)")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--jobs", type=count, default=None, metavar="N",
+                   help="parallel walks (default: every core)")
+    p.add_argument("--duration", type=positive, default=None, metavar="S",
                    help="sim s walked after each command (default: config/sweep.yaml's duration_after_s)")
-    p.add_argument("--config", default=None, metavar="FILE", help="a sweep YAML (default config/sweep.yaml)")
+    p.add_argument("--config", default=None, type=in_text_file, metavar="FILE",
+                   help="a sweep YAML (default config/sweep.yaml)")
     p.add_argument("--calibrate", action="store_true",
                    help="only measure the zeta = 1 calibration of config/feedback.yaml (pitch reference, "
                         "touchdown phase) and write DIR/calibration.json")

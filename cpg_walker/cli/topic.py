@@ -7,6 +7,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from cpg_walker.cli.checks import at_least, count, non_negative, positive
+from cpg_walker.errors import InputError
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("topic", help="list/echo/measure the rate of/inspect/publish to topics (like `ros2 "
@@ -14,29 +17,29 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Topics of the running graph on the domain in ROS_DOMAIN_ID.")
     ps = p.add_subparsers(dest="verb", metavar="VERB", required=True)
     q = ps.add_parser("list", help="topics with their types")
-    q.add_argument("--wait", type=float, default=3.0, metavar="S",
+    q.add_argument("--wait", type=non_negative, default=3.0, metavar="S",
                    help="at most S seconds of discovery (default 3)")
     q.set_defaults(func=_list)
     q = ps.add_parser("echo", help="print the messages as YAML")
     q.add_argument("topic", metavar="TOPIC")
     q.add_argument("--once", action="store_true", help="one message, then exit")
-    q.add_argument("--count", type=int, default=None, metavar="N", help="N messages, then exit")
+    q.add_argument("--count", type=count, default=None, metavar="N", help="N messages, then exit")
     q.add_argument("--field", default=None, metavar="A.B", help="only this field, e.g. header.stamp")
-    q.add_argument("--timeout", type=float, default=None, metavar="S",
+    q.add_argument("--timeout", type=non_negative, default=None, metavar="S",
                    help="fail if the messages have not arrived after S wall seconds (default: wait)")
     q.set_defaults(func=_echo)
     q = ps.add_parser("hz", help="arrival rate in wall-clock time (not sim time), every second")
     q.add_argument("topic", metavar="TOPIC")
-    q.add_argument("--window", type=int, default=10000, metavar="N",
+    q.add_argument("--window", type=at_least(2, int), default=10000, metavar="N",
                    help="statistics over the last N messages (default 10000)")
-    q.add_argument("--duration", type=float, default=None, metavar="S",
+    q.add_argument("--duration", type=positive, default=None, metavar="S",
                    help="stop after S wall seconds (default: until Ctrl-C)")
     q.set_defaults(func=_hz)
     q = ps.add_parser("info", help="a topic's type and publisher/subscription counts (-v: each endpoint)")
     q.add_argument("topic", metavar="TOPIC")
     q.add_argument("-v", "--verbose", action="store_true",
                    help="each endpoint's node, type, GID and QoS profile")
-    q.add_argument("--timeout", type=float, default=10.0, metavar="S",
+    q.add_argument("--timeout", type=non_negative, default=10.0, metavar="S",
                    help="seconds to wait for the topic to be discovered (default 10)")
     q.set_defaults(func=_info)
     _register_pub(ps)
@@ -75,7 +78,7 @@ def _register_pub(ps: argparse._SubParsersAction) -> None:
     g.add_argument("--stdin", action="store_true", help="read the values from standard input")
     q.add_argument("-r", "--rate", metavar="N", type=_positive_float, default=1.0,
                    help="publishing rate in Hz, wall clock (default: 1)")
-    q.add_argument("-p", "--print", metavar="N", type=int, default=1,
+    q.add_argument("-p", "--print", metavar="N", type=at_least(0, int), default=1,
                    help="only print every N-th published message (default: 1; 0: none)")
     g = q.add_mutually_exclusive_group()
     g.add_argument("-1", "--once", action="store_true", help="publish one message and exit")
@@ -93,7 +96,7 @@ def _register_pub(ps: argparse._SubParsersAction) -> None:
                    help="QoS preset to publish with: default, sensor_data, system_default, services_default, "
                         "parameters, parameter_events, action_status_default, best_available (default: "
                         "default)")
-    q.add_argument("--qos-depth", metavar="N", type=int, default=None,
+    q.add_argument("--qos-depth", metavar="N", type=at_least(0, int), default=None,
                    help="queue depth (overrides the preset's)")
     q.add_argument("--qos-history", metavar="keep_last|keep_all", default=None,
                    help="history (overrides the preset's)")
@@ -123,7 +126,7 @@ def _echo(args: argparse.Namespace) -> int:
 
     count = 1 if args.once else args.count
     if count is not None and count < 1:
-        raise ValueError(f"--count must be at least 1, got {count}")
+        raise InputError(f"--count must be at least 1, got {count}")
     try:
         with rt.Session("cpg_walker_topic") as s:
             for text in rt.echo(s, args.topic, count, args.field, timeout=args.timeout):
@@ -174,7 +177,7 @@ def _pub(args: argparse.Namespace) -> int:
     wait = args.wait_matching_subscriptions
     wait = int(times != 0) if wait is None else wait
     if wait == 0 and args.max_wait_time_secs is not None:
-        raise ValueError("--max-wait-time-secs needs --wait-matching-subscriptions, --once or --times")
+        raise InputError("--max-wait-time-secs needs --wait-matching-subscriptions, --once or --times")
     qos = rp.qos_profile(args.qos_profile, args.qos_reliability, args.qos_durability, args.qos_depth,
                          args.qos_history)
     cls, msg, stamps = rp.build_message(args.message_type, sys.stdin.read() if args.stdin else args.values)
@@ -186,7 +189,7 @@ def _pub(args: argparse.Namespace) -> int:
         try:
             session = rt.Session(args.node_name, hidden=False, pid_suffix=False)
         except InvalidNodeNameException as exc:
-            raise ValueError(f"--node-name {args.node_name!r} is not a valid node name "
+            raise InputError(f"--node-name {args.node_name!r} is not a valid node name "
                              f"({str(exc).splitlines()[0]})") from None
     try:
         with session as s:

@@ -7,14 +7,15 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import out_dir, positive
 from cpg_walker.cli.outcome import fall_line, report_fall
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("two-hosts", help="the walk across a veth pair between two network namespaces "
                                          "(root), next to the local walk; write two_hosts.json")
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--duration", type=float, default=30.0, metavar="S", help="sim seconds (default 30)")
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
+    p.add_argument("--duration", type=positive, default=30.0, metavar="S", help="sim seconds (default 30)")
     p.add_argument("--no-local", dest="local", action="store_false",
                    help="skip the walk on one host (only the two-host walk)")
     p.set_defaults(func=_run)
@@ -23,13 +24,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     import json
 
-    from cpg_walker.cli.main import UserError
+    from cpg_walker.errors import InputError
     from cpg_walker.experiments.two_hosts import compare
     from cpg_walker.nodes.netns import unavailable
 
     why = unavailable()
     if why:
-        raise UserError(f"cannot create the two hosts: {why}")
+        raise InputError(f"cannot create the two hosts: {why}")
     result = compare(args.out, duration=args.duration, local=args.local)
     print(json.dumps(result["state_to_torque_ms"]))
     for name, run in result["runs"].items():

@@ -7,14 +7,16 @@ import argparse
 import sys
 from pathlib import Path
 
+from cpg_walker.cli.checks import in_text_file, out_file
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("urdf", help="write the HOAP-2 URDF generated from the MuJoCo model",
                        description="Generate the URDF from the MJCF (the one source of truth).")
-    p.add_argument("--out", default="-", metavar="FILE",
+    p.add_argument("--out", default="-", type=out_file, metavar="FILE",
                    help="where to write it ('-' = standard output, the default); the shipped file is "
                         "cpg_walker/robot/hoap2.urdf")
-    p.add_argument("--model", default=None, metavar="MJCF",
+    p.add_argument("--model", default=None, type=in_text_file, metavar="MJCF",
                    help="another MJCF (default: the package's hoap2.xml)")
     p.set_defaults(func=_run)
 

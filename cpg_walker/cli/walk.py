@@ -8,20 +8,26 @@ from __future__ import annotations
 
 import argparse
 
+from cpg_walker.cli.checks import config_or_file, out_dir, positive, within
 from cpg_walker.cli.graph import add_foxglove_option
 from cpg_walker.cli.outcome import walk_status
 from cpg_walker.nodes.runtime import PACINGS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
 
+def _cpg_file(text: str) -> str:
+    """``--cpg-file``: a readable YAML file, or '' (cpg_node learns it)."""
+    return text if text == "" else config_or_file(text)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("walk", help="CPG walk through the ROS graph (three node processes); write walk.json")
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--duration", type=float, default=60.0, metavar="S", help="sim seconds (default 60)")
-    p.add_argument("--zeta", type=float, default=None, metavar="Z",
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
+    p.add_argument("--duration", type=positive, default=60.0, metavar="S", help="sim seconds (default 60)")
+    p.add_argument("--zeta", type=within(*ZETA_RANGE), default=None, metavar="Z",
                    help="frequency ratio of the oscillators, in [{:g}, {:g}] (default: cpg_node's, "
                         "config/cpg.yaml)".format(*ZETA_RANGE))
-    p.add_argument("--alpha", type=float, default=None, metavar="A",
+    p.add_argument("--alpha", type=within(*ALPHA_RANGE), default=None, metavar="A",
                    help="amplitude (step length) scale, in [{:g}, {:g}] (default: cpg_node's, "
                         "config/cpg.yaml)".format(*ALPHA_RANGE))
     p.add_argument("--feedback", choices=("on", "off"), default=None,
@@ -29,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--schedule", default=None, metavar="T,Z,A;...",
                    help="(sim s, zeta, alpha) changes, sent through cpg_node's SetParameters service when "
                         "the sim reaches each time (as 'cpg-walker param set /cpg zeta Z' would)")
-    p.add_argument("--cpg-file", default=None, metavar="FILE",
+    p.add_argument("--cpg-file", default=None, type=_cpg_file, metavar="FILE",
                    help="learned CPG YAML (default: cpg_node's cpg_file, config/cpg.yaml; '' = cpg_node "
                         "learns it)")
     p.add_argument("--pacing", choices=PACINGS, default="lockstep",

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cpg_walker.errors import InputError
+
 #: (name, duration s, linear.x, angular.z, settle s) after the start, then ``STOP_S`` without commands;
 #: each window's first ``settle`` s are left out of the measurement (a turn builds up over ~8 s: the
 #: heading pathway's P law on a low-passed error has to lead the yaw by ~0.5 rad first).
@@ -51,16 +53,14 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Bool
 
-    from cpg_walker.nodes.graph import isolated_env, quiet_domain_id
+    from cpg_walker.nodes.graph import env_domain_id, isolated_env, quiet_domain_id
     from cpg_walker.nodes.graph_runner import resolve_domain
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     if attach and domain_id is None:
-        env = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
-        if not env.isdigit():
-            raise ValueError(f"ROS_DOMAIN_ID must be an integer, got {env!r}")
-        domain_id = int(env)
+        env = env_domain_id()
+        domain_id = 0 if env is None else env
     domain = quiet_domain_id() if domain_id is None else resolve_domain(int(domain_id))[0]  # 0..232
     total = sum(p[1] for p in PLAN) + STOP_S
     proc = None
@@ -154,7 +154,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     if t0 is None or not sent:
         raise ValueError(f"no /odom/ground_truth from a graph on DDS domain {domain} ({where})")
     if stalled:
-        raise ValueError(f"/odom/ground_truth on DDS domain {domain} stopped for {NO_ODOM_S:g} s at sim "
+        raise InputError(f"/odom/ground_truth on DDS domain {domain} stopped for {NO_ODOM_S:g} s at sim "
                          f"{odom[-1][0]:.1f} s, before the plan's end ({where})")
     res = measure(np.array(odom), t0, sent, cmd_state)
     res["fell"] = bool(fallen)

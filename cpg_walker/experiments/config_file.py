@@ -7,10 +7,11 @@ from pathlib import Path
 
 import yaml
 
+from cpg_walker.errors import InputError
 from cpg_walker.paths import yaml_error
 
 
-class ConfigError(ValueError):
+class ConfigError(InputError):
     """A bad configuration entry (the message names file, line and key)."""
 
 

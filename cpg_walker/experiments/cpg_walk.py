@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpg_walker.errors import InputError
 from cpg_walker.walker.controller import HumanoidCPG
 from cpg_walker.walker.feedback import FeedbackController
 from cpg_walker.walker.gait_source import CPGGaitSource, FeedbackGaitSource
@@ -34,7 +35,7 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float | None = None, alpha: f
     from cpg_walker.robot.pid import PidLaw
 
     if not (duration > 0 and math.isfinite(duration)):
-        raise ValueError(f"--duration must be a positive number of seconds, got {duration}")
+        raise InputError(f"--duration must be a positive number of seconds, got {duration}")
     defaults = cpg_defaults()
     zeta = float(defaults["zeta"]) if zeta is None else zeta
     alpha = float(defaults["alpha"]) if alpha is None else alpha

@@ -22,6 +22,8 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from cpg_walker.errors import InputError
+
 #: Sim s of odometry the walking speed is measured over (about two strides).
 WINDOW_S = 2.0
 #: "Walking again": the speed over the last WINDOW_S at least this fraction of the speed before the faults.
@@ -305,7 +307,7 @@ def run_faults(out_dir: str | Path, zeta: float = 1.0, warm_s: float = 14.0, awa
     DDS domain (None: a quiet one)."""
     bad = [f for f in faults if f not in FAULT_ORDER]
     if bad:
-        raise ValueError(f"unknown node(s) {bad}; faults are of {list(FAULT_ORDER)}")
+        raise InputError(f"unknown node(s) {bad}; faults are of {list(FAULT_ORDER)}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     results: list[FaultResult] = []

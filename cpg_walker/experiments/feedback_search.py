@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpg_walker.errors import InputError
 from cpg_walker.experiments.config_file import Config, deep_merge
 from cpg_walker.experiments.walk_runs import (
     CELL_LEGEND,
@@ -210,7 +211,7 @@ def search(out_dir: str | Path, generations: int | None = None, popsize: int | N
     gens = int(cfg["cma"]["generations"] if generations is None else generations)
     pop = int(cfg["cma"]["popsize"] if popsize is None else popsize)
     if gens < 1 or pop < 2:
-        raise ValueError(f"--generations must be >= 1 and --popsize >= 2, got {gens}, {pop}")
+        raise InputError(f"--generations must be >= 1 and --popsize >= 2, got {gens}, {pop}")
     out = Path(out_dir)
     space = Space(cfg["fields"])
     state_file, trials = out / "state.pkl", out / "trials.jsonl"
@@ -218,11 +219,11 @@ def search(out_dir: str | Path, generations: int | None = None, popsize: int | N
              "scenarios": cfg["scenarios"], "objective": cfg["objective"]}
     if resume:
         if not state_file.is_file():
-            raise FileNotFoundError(f"--resume: no saved search in {out} (state.pkl)")
+            raise InputError(f"--resume: no saved search in {out} (state.pkl)")
         st = pickle.loads(state_file.read_bytes())
         if st["setup"] != setup:
             diff = sorted(k for k in setup if st["setup"].get(k) != setup[k])
-            raise ValueError(f"--resume: the saved search in {out} differs in {diff}; use another --out")
+            raise InputError(f"--resume: the saved search in {out} differs in {diff}; use another --out")
         es, gen, best = st["es"], st["generation"], st["best"]
         np.random.set_state(st["np_random"])
         if trials.is_file():  # drop a generation that was cut short
@@ -231,7 +232,7 @@ def search(out_dir: str | Path, generations: int | None = None, popsize: int | N
         log(f"feedback-search: resuming after generation {gen} (best objective {best['objective']})")
     else:
         if state_file.exists() or trials.exists():
-            raise ValueError(f"{out} already holds a search; pass --resume to continue it, or another --out")
+            raise InputError(f"{out} already holds a search; pass --resume to continue it, or another --out")
         out.mkdir(parents=True, exist_ok=True)
         x0 = np.clip(space.normalise(asdict(FeedbackConfig.load())), 0.05, 0.95)
         es = cma.CMAEvolutionStrategy(x0.tolist(), float(cfg["cma"]["sigma0"]),
@@ -277,7 +278,7 @@ def read_best(path: Path) -> dict:
 
     d = yaml.safe_load(path.read_text(encoding="utf-8"))
     if not isinstance(d, dict):
-        raise ValueError(f"{path}: expected a mapping of FeedbackConfig fields")
+        raise InputError(f"{path}: expected a mapping of FeedbackConfig fields")
     FeedbackConfig.load(**d)  # validates names and values
     return d
 

@@ -15,6 +15,7 @@ import yaml
 
 from cpg_walker.cpg import teaching as tch
 from cpg_walker.cpg.network import CPGNetwork, CPGParams
+from cpg_walker.errors import InputError
 from cpg_walker.paths import config_path
 
 
@@ -110,7 +111,7 @@ def pick_time_column(header: list[str], time_column: str | None = None) -> int:
     brackets ignored); else the first column."""
     if time_column is not None:
         if time_column not in header:
-            raise ValueError(f"no time column named {time_column!r} (columns: {', '.join(header)})")
+            raise InputError(f"no time column named {time_column!r} (columns: {', '.join(header)})")
         return header.index(time_column)
     for i, name in enumerate(header):
         bare = name.split("[")[0].split("(")[0].strip().lower()
@@ -132,18 +133,18 @@ def read_csv(
         rows = list(csv.reader(fh))
     rows = [r for r in rows if any(cell.strip() for cell in r)]
     if not rows:
-        raise ValueError(f"{path}: the file is empty")
+        raise InputError(f"{path}: the file is empty")
     header = [h.strip() for h in rows[0]]
     if len(header) < 2:
-        raise ValueError(f"{path}:1: need a header with a time column and at least one signal column")
+        raise InputError(f"{path}:1: need a header with a time column and at least one signal column")
     try:
         tcol = pick_time_column(header, time_column)
     except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
+        raise InputError(f"{path}: {exc}") from None
     signals = [name for i, name in enumerate(header) if i != tcol]
     if column is not None:
         if column not in signals:
-            raise ValueError(f"{path}: no column named {column!r} (columns: {', '.join(signals)})")
+            raise InputError(f"{path}: no column named {column!r} (columns: {', '.join(signals)})")
         cols = [header.index(column)]
     else:
         cols = [i for i in range(len(header)) if i != tcol]
@@ -151,22 +152,22 @@ def read_csv(
     for i, row in enumerate(rows[1:]):
         line = i + 2
         if len(row) != len(header):
-            raise ValueError(f"{path}:{line}: {len(row)} fields, the header has {len(header)}")
+            raise InputError(f"{path}:{line}: {len(row)} fields, the header has {len(header)}")
         for j, c in enumerate([tcol, *cols]):
             cell = row[c].strip()
             try:
                 value = float(cell)
             except ValueError:
-                raise ValueError(f"{path}:{line}: column {header[c]!r}: {cell!r} is not a number") from None
+                raise InputError(f"{path}:{line}: column {header[c]!r}: {cell!r} is not a number") from None
             if not np.isfinite(value):
-                raise ValueError(f"{path}:{line}: column {header[c]!r}: {cell!r} is not a finite number")
+                raise InputError(f"{path}:{line}: column {header[c]!r}: {cell!r} is not a finite number")
             data[i, j] = value
     if data.shape[0] == 0:
-        raise ValueError(f"{path}: no data rows after the header")
+        raise InputError(f"{path}: no data rows after the header")
     steps = np.diff(data[:, 0])
     if np.any(steps <= 0):
         i = int(np.argmax(steps <= 0))
-        raise ValueError(
+        raise InputError(
             f"{path}:{i + 3}: time {data[i + 1, 0]} does not increase (previous row: {data[i, 0]})"
         )
     return data[:, 0], data[:, 1:], [header[c] for c in cols]

@@ -18,6 +18,8 @@ import os
 import time
 from pathlib import Path
 
+from cpg_walker.errors import InputError
+
 #: The changes, cycled: ("param", zeta, alpha) or ("cmd_vel", linear.x m/s, angular.z rad/s) or ("stop",).
 PLAN: tuple[tuple, ...] = (
     ("param", 1.0, 1.0), ("param", 1.15, 1.0), ("param", 1.15, 0.8), ("param", 0.85, 1.0),
@@ -83,7 +85,7 @@ def run_soak(out_dir: str | Path, minutes: float = 10.0, period: float = 20.0, p
     from cpg_walker.experiments.faults import FaultGraph
 
     if not (minutes > 0 and period > 0 and math.isfinite(minutes * period)):
-        raise ValueError(f"minutes and period must be positive, got {minutes}, {period}")
+        raise InputError(f"minutes and period must be positive, got {minutes}, {period}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n_windows = max(1, round(minutes * 60.0 / period))

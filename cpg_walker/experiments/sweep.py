@@ -22,6 +22,7 @@ import json
 import math
 from pathlib import Path
 
+from cpg_walker.errors import InputError
 from cpg_walker.experiments.config_file import Config, deep_merge
 from cpg_walker.experiments.walk_runs import (
     CELL_LEGEND,
@@ -140,7 +141,7 @@ def run_sweep(out_dir: str | Path, quick: bool = False, jobs: int | None = None,
     cfg = load_config(config, quick)
     if duration_after_s is not None:
         if not duration_after_s > 0:
-            raise ValueError(f"--duration must be positive, got {duration_after_s}")
+            raise InputError(f"--duration must be positive, got {duration_after_s}")
         cfg["duration_after_s"] = float(duration_after_s)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

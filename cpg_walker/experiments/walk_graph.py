@@ -27,6 +27,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Protocol
 
+from cpg_walker.errors import InputError
 from cpg_walker.nodes.graph import Placement
 from cpg_walker.nodes.recording import BAG_NAME
 from cpg_walker.walker.learning import cpg_defaults
@@ -51,7 +52,7 @@ def check_modulation(zeta: float, alpha: float) -> None:
     for name, value in (("zeta", zeta), ("alpha", alpha)):
         reason = modulation_error(name, value)
         if reason:
-            raise ValueError(reason)
+            raise InputError(reason)
 
 
 def parse_schedule(text: str) -> list[tuple[float, float, float]]:
@@ -64,10 +65,10 @@ def parse_schedule(text: str) -> list[tuple[float, float, float]]:
         try:
             t, z, a = (float(x) for x in parts)
         except ValueError:
-            raise ValueError(f"--schedule item {item!r}: expected 'time,zeta,alpha' (three numbers)") \
+            raise InputError(f"--schedule item {item!r}: expected 'time,zeta,alpha' (three numbers)") \
                 from None
         if not (t >= 0 and math.isfinite(t)):
-            raise ValueError(f"--schedule item {item!r}: the time must be >= 0 sim s")
+            raise InputError(f"--schedule item {item!r}: the time must be >= 0 sim s")
         check_modulation(z, a)
         out.append((t, z, a))
     return sorted(out)
@@ -205,7 +206,7 @@ def run_graph_walk(
         host, port = parse_address(foxglove)  # ValueError before anything starts
         view = {"host": host, "port": port}
     if not (duration > 0 and math.isfinite(duration)):
-        raise ValueError(f"--duration must be a positive number of seconds, got {duration}")
+        raise InputError(f"--duration must be a positive number of seconds, got {duration}")
     defaults = cpg_defaults()
     overrides: dict[str, object] = {name: float(value) for name, value in (("zeta", zeta), ("alpha", alpha))
                                     if value is not None}
@@ -216,7 +217,7 @@ def run_graph_walk(
     for t, z, a in schedule:
         check_modulation(z, a)
         if not 0 <= t < duration:
-            raise ValueError(f"schedule time {t:g} s is outside the walk (0 to {duration:g} sim s)")
+            raise InputError(f"schedule time {t:g} s is outside the walk (0 to {duration:g} sim s)")
     zeta, alpha = (float(defaults[name]) if value is None else value
                    for name, value in (("zeta", zeta), ("alpha", alpha)))
     check_modulation(zeta, alpha)

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from cpg_walker.errors import InputError
 from cpg_walker.walker.feedback import PAPER_PATHWAYS, FeedbackConfig, FeedbackController, default_pathways
 from cpg_walker.walker.gait_source import CPGGaitSource, FeedbackGaitSource
 from cpg_walker.walker.learning import cpg_defaults, load_controller
@@ -43,7 +44,7 @@ def variant(name: str) -> tuple[tuple[str, ...] | None, dict]:
         return PAPER_PATHWAYS, dict(PAPER_OVERRIDES)
     if name == "ours":
         return default_pathways(), {}
-    raise ValueError(f"unknown feedback variant {name!r}; use off, paper or ours")
+    raise InputError(f"unknown feedback variant {name!r}; use off, paper or ours")
 
 
 def start_time(start: str) -> float:
@@ -52,7 +53,7 @@ def start_time(start: str) -> float:
         return 0.0
     m = _START.match(start)
     if not m:
-        raise ValueError(f"start {start!r}: use 'standing' or 'at_<T>s' (e.g. 'at_10s')")
+        raise InputError(f"start {start!r}: use 'standing' or 'at_<T>s' (e.g. 'at_10s')")
     return float(m.group(1))
 
 
@@ -259,7 +260,7 @@ def run_many(fn: Callable, items: Iterable, jobs: int | None = None, progress=No
     items = list(items)
     jobs = (os.cpu_count() or 1) if jobs is None else int(jobs)
     if jobs < 1:
-        raise ValueError(f"--jobs must be >= 1, got {jobs}")
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
     out: list = [None] * len(items)
     if jobs == 1 or len(items) <= 1:
         for k, x in enumerate(items):

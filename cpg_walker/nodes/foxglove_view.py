@@ -18,6 +18,7 @@ import struct
 import mujoco
 import numpy as np
 
+from cpg_walker.errors import InputError
 from cpg_walker.robot.contact import SIDES, TouchdownDetector
 from cpg_walker.robot.frames import body_transforms, odom_transform, set_pose, site_transforms
 from cpg_walker.robot.hoap2 import MODEL_PATH
@@ -41,13 +42,13 @@ def parse_address(text: str | None) -> tuple[str, int]:
         host = DEFAULT_HOST
     host = host.strip("[]") or DEFAULT_HOST
     if not re.fullmatch(r"\d{1,5}", port_text) or int(port_text) > 65535:
-        raise ValueError(f"--foxglove expects [HOST:]PORT with PORT in 0..65535, got {text!r}")
+        raise InputError(f"--foxglove expects [HOST:]PORT with PORT in 0..65535, got {text!r}")
     if host != "localhost":
         try:
             ipaddress.ip_address(host)
         except ValueError:
             if not re.fullmatch(r"[A-Za-z0-9.-]+", host):
-                raise ValueError(f"--foxglove: {host!r} is not a host name or IP address") from None
+                raise InputError(f"--foxglove: {host!r} is not a host name or IP address") from None
     return host, int(port_text)
 
 

@@ -26,12 +26,37 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cpg_walker.errors import InputError
 from cpg_walker.nodes.runtime import NODE_NAMES, params_file
 
 NODES = tuple(NODE_NAMES)
 #: Nodes stopped after all the others, with their own wall-s timeout: the recorder keeps listening until
 #: the rest have gone quiet, then completes its bag (computing /tf takes a while on a long run).
 STOP_LAST = {"recorder_node": 600.0}
+
+
+#: The DDS domains ROS 2 allows (ROS_DOMAIN_ID, --domain-id).
+DOMAIN_RANGE = (0, 232)
+
+
+def check_domain_id(domain_id: int, origin: str = "the DDS domain") -> int:
+    """``domain_id`` if it is in DOMAIN_RANGE; InputError naming ``origin`` otherwise."""
+    if not DOMAIN_RANGE[0] <= domain_id <= DOMAIN_RANGE[1]:
+        raise InputError(f"{origin} must be in {DOMAIN_RANGE[0]}..{DOMAIN_RANGE[1]}, got {domain_id}")
+    return domain_id
+
+
+def env_domain_id() -> int | None:
+    """ROS_DOMAIN_ID as a domain in 0..232; None when unset or empty; InputError when anything else."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if not text:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise InputError(f"ROS_DOMAIN_ID must be an integer in {DOMAIN_RANGE[0]}..{DOMAIN_RANGE[1]}, got "
+                         f"{text!r}") from None
+    return check_domain_id(value, "ROS_DOMAIN_ID")
 
 
 def random_domain_id() -> int:

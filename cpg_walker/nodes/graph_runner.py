@@ -5,7 +5,6 @@ stream the nodes' log lines with a prefix, stop everything on Ctrl-C / SIGTERM /
 from __future__ import annotations
 
 import math
-import os
 import signal
 import sys
 import tempfile
@@ -13,6 +12,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
+
+from cpg_walker.errors import InputError
 
 PREFIX = {"sim_node": "sim", "pid_node": "pid", "cpg_node": "cpg", "target_player_node": "player",
           "recorder_node": "rec", "foxglove_node": "fox"}
@@ -47,9 +48,9 @@ class GraphSpec:
 
         pacing, duration = self.sim_value("pacing"), self.sim_value("duration")
         if pacing not in PACINGS:
-            raise ValueError(f"pacing must be one of {PACINGS}, got {pacing!r}")
+            raise InputError(f"pacing must be one of {PACINGS}, got {pacing!r}")
         if not (duration >= 0 and math.isfinite(duration)):
-            raise ValueError(f"--duration must be >= 0 sim seconds (0: until stopped), got {duration}")
+            raise InputError(f"--duration must be >= 0 sim seconds (0: until stopped), got {duration}")
         target = "target_player_node" if self.player else "cpg_node"
         sim = {name: (float(value) if name == "duration" else value)
                for name, value in (("pacing", self.pacing), ("duration", self.duration)) if value is not None}
@@ -63,10 +64,10 @@ class GraphSpec:
             if value is None:
                 continue
             if self.player:
-                raise ValueError(f"--{name} is a cpg_node parameter; not with --player")
+                raise InputError(f"--{name} is a cpg_node parameter; not with --player")
             reason = modulation_error(name, value)
             if reason:
-                raise ValueError(reason)
+                raise InputError(reason)
             out["cpg_node"][name] = float(value)
         if self.foxglove is not None:
             from cpg_walker.nodes.foxglove_view import parse_address
@@ -75,7 +76,7 @@ class GraphSpec:
             out["foxglove_node"] = {"host": host, "port": port}
         for node, name, value in self.params:
             if node not in out:
-                raise ValueError(f"-p {node}:{name}: {node} is not part of this graph ({', '.join(out)})")
+                raise InputError(f"-p {node}:{name}: {node} is not part of this graph ({', '.join(out)})")
             out[node][name] = value
         return out
 
@@ -104,21 +105,14 @@ def fall_of(record_path: Path) -> tuple[float | None, list | None] | None:
 
 def resolve_domain(domain_id: int | None) -> tuple[int, str]:
     """(domain, where it came from): the option, else ROS_DOMAIN_ID, else a free one."""
-    from cpg_walker.nodes.graph import quiet_domain_id
+    from cpg_walker.nodes.graph import check_domain_id, env_domain_id, quiet_domain_id
 
     if domain_id is not None:
-        chosen, how = domain_id, "--domain-id"
-    elif os.environ.get("ROS_DOMAIN_ID", "").strip():
-        try:
-            chosen, how = int(os.environ["ROS_DOMAIN_ID"]), "ROS_DOMAIN_ID"
-        except ValueError:
-            raise ValueError(f"ROS_DOMAIN_ID must be an integer, got "
-                             f"{os.environ['ROS_DOMAIN_ID']!r}") from None
-    else:
-        return quiet_domain_id(), "a free one picked at random"
-    if not 0 <= chosen <= 232:
-        raise ValueError(f"the DDS domain must be in 0..232, got {chosen}")
-    return chosen, how
+        return check_domain_id(domain_id, "--domain-id"), "--domain-id"
+    env = env_domain_id()
+    if env is not None:
+        return env, "ROS_DOMAIN_ID"
+    return quiet_domain_id(), "a free one picked at random"
 
 
 #: Wall s for the recorder to start listening before the graph starts without it being an error.
@@ -141,7 +135,7 @@ def start_foxglove(g, params: dict[str, object]) -> str:
     except RuntimeError:
         log = g.procs["foxglove_node"].log()
         errors = [line for line in log.splitlines() if "error" in line.lower()]
-        raise ValueError(f"the Foxglove live view did not start: {errors[-1] if errors else log[-500:]}") \
+        raise InputError(f"the Foxglove live view did not start: {errors[-1] if errors else log[-500:]}") \
             from None
     found = re.search(rf"{READY}.*", g.procs["foxglove_node"].log())
     return found.group(0) if found else READY

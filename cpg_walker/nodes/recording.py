@@ -27,6 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from cpg_walker.errors import InputError
+
 #: File name (without suffix) of the bag in its directory: DIR/recording.mcap + DIR/metadata.yaml.
 BAG_NAME = "recording"
 CLOCK_TOPIC = "/clock"
@@ -410,18 +412,24 @@ def read_topics(path: str | Path, topics: list[str] | None = None) -> dict[str, 
         return _read_rosbag2(d, topics)
     if p.is_file() and p.suffix == ".mcap":
         return _read_mcap(p, topics)
-    raise FileNotFoundError(f"{p}: not a recording (no metadata.yaml in {d}, not a .mcap file)")
+    raise InputError(f"{p}: not a recording (no metadata.yaml in {d}, not a .mcap file)")
 
 
 def _read_rosbag2(d: Path, topics: list[str] | None) -> dict[str, list[tuple[int, Any]]]:
-    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2 import Reader, ReaderError
+    from rosbags.serde import SerdeError
 
     store = typestore()
     out: dict[str, list[tuple[int, Any]]] = {}
-    with Reader(d) as reader:
-        conns = [c for c in reader.connections if topics is None or c.topic in topics]
-        for conn, ns, raw in reader.messages(connections=conns):
-            out.setdefault(conn.topic, []).append((ns, deserialize(store, raw, conn.msgtype)))
+    try:
+        with Reader(d) as reader:
+            conns = [c for c in reader.connections if topics is None or c.topic in topics]
+            for conn, ns, raw in reader.messages(connections=conns):
+                out.setdefault(conn.topic, []).append((ns, deserialize(store, raw, conn.msgtype)))
+    except (ReaderError, SerdeError, OSError, EOFError, ValueError, OverflowError, MemoryError,
+            struct.error) as exc:
+        raise InputError(f"{d}: not a readable rosbag2 recording (truncated or corrupt: "
+                         f"{type(exc).__name__}: {' '.join(str(exc).split())})") from None
     return out
 
 
@@ -430,6 +438,7 @@ def _read_mcap(p: Path, topics: list[str] | None) -> dict[str, list[tuple[int, A
 
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
+    from rosbags.serde import SerdeError
 
     store = typestore()
     out: dict[str, list[tuple[int, Any]]] = {}
@@ -440,7 +449,8 @@ def _read_mcap(p: Path, topics: list[str] | None) -> dict[str, list[tuple[int, A
                     continue
                 out.setdefault(channel.topic, []).append(
                     (message.log_time, deserialize(store, message.data, schema.name)))
-        except (OSError, EOFError, ValueError, struct.error, McapError) as exc:
-            raise ValueError(f"{p}: not a readable MCAP recording (truncated or corrupt: "
+        except (OSError, EOFError, ValueError, OverflowError, MemoryError, struct.error, McapError,
+                SerdeError, KeyError) as exc:  # KeyError: a schema name unknown to the typestore
+            raise InputError(f"{p}: not a readable MCAP recording (truncated or corrupt: "
                              f"{type(exc).__name__}: {exc})") from None
     return out

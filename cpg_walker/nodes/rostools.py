@@ -18,6 +18,8 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from typing import Any
 
+from cpg_walker.errors import InputError
+
 
 class ToolError(RuntimeError):
     """A run-time failure the user can act on (node or topic not found, a rejected value): one line."""
@@ -25,10 +27,10 @@ class ToolError(RuntimeError):
 
 def domain_id() -> int:
     """The DDS domain the tools join: ``ROS_DOMAIN_ID`` or 0."""
-    try:
-        return int(os.environ.get("ROS_DOMAIN_ID", "0") or 0)
-    except ValueError:
-        raise ValueError(f"ROS_DOMAIN_ID must be an integer, got {os.environ['ROS_DOMAIN_ID']!r}") from None
+    from cpg_walker.nodes.graph import env_domain_id
+
+    domain = env_domain_id()
+    return 0 if domain is None else domain
 
 
 class Session:
@@ -106,7 +108,7 @@ def node_name(name: str) -> str:
     """``cpg`` or ``/cpg`` -> ``/cpg``."""
     name = name.strip()
     if not name or name == "/":
-        raise ValueError("a node name is required, e.g. /cpg")
+        raise InputError("a node name is required, e.g. /cpg")
     return name if name.startswith("/") else "/" + name
 
 
@@ -289,7 +291,7 @@ def message_class(type_name: str) -> type:
     if len(parts) == 2:
         parts.insert(1, "msg")
     if len(parts) != 3 or not all(parts):
-        raise ValueError(f"not a message type: {type_name!r} (expected pkg/msg/Type)")
+        raise InputError(f"not a message type: {type_name!r} (expected pkg/msg/Type)")
     try:
         return getattr(importlib.import_module(f"{parts[0]}.{parts[1]}"), parts[2])
     except (ImportError, AttributeError) as exc:
@@ -367,7 +369,7 @@ def field(msg: Any, path: str | None) -> Any:
     value = msg
     for part in path.split("."):
         if not hasattr(value, "get_fields_and_field_types") or part not in value.get_fields_and_field_types():
-            raise ValueError(f"no field {part!r} in {path!r} of {type(msg).__name__}")
+            raise InputError(f"no field {part!r} in {path!r} of {type(msg).__name__}")
         value = getattr(value, part)
     return value
 
@@ -402,7 +404,7 @@ class RateMeter:
 
     def __init__(self, window: int = 10000):
         if window < 2:
-            raise ValueError(f"--window must be at least 2, got {window}")
+            raise InputError(f"--window must be at least 2, got {window}")
         self.intervals: deque[float] = deque(maxlen=window - 1)
         self.last: float | None = None
         self.count = 0

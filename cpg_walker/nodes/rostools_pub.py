@@ -10,6 +10,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from cpg_walker.errors import InputError
 from cpg_walker.nodes.rostools import Session, ToolError, message_class, node_name
 
 FLOAT_TYPES = {"float", "double", "float32", "float64", "long double"}
@@ -36,7 +37,7 @@ def _element(type_str: str) -> tuple[str, bool, int | None, bool]:
 
 def _check_size(value: list, type_str: str, size: int | None, exact: bool, where: str) -> None:
     if size is not None and (len(value) != size if exact else len(value) > size):
-        raise ValueError(f"field {where!r} is a {type_str}: {'exactly' if exact else 'at most'} {size} "
+        raise InputError(f"field {where!r} is a {type_str}: {'exactly' if exact else 'at most'} {size} "
                          f"items, got {len(value)}")
 
 
@@ -52,7 +53,7 @@ def _scalar(value: Any, base: str, where: str) -> Any:
         if isinstance(value, bool) or not isinstance(value, int):
             raise bad
         if not lo <= value <= hi:
-            raise ValueError(f"field {where!r} is a {base}: {value} is outside [{lo}, {hi}]")
+            raise InputError(f"field {where!r} is a {base}: {value} is outside [{lo}, {hi}]")
         return bytes([value]) if base in BYTE_TYPES else value
     if base == "boolean":
         if not isinstance(value, bool):
@@ -64,7 +65,7 @@ def _scalar(value: Any, base: str, where: str) -> Any:
         text = value if isinstance(value, str) else str(value)  # data: 5 -> '5', as ros2
         bound = re.fullmatch(r"w?string<=(\d+)", base)
         if bound and len(text) > int(bound.group(1)):
-            raise ValueError(f"field {where!r} is a {base}: {len(text)} characters")
+            raise InputError(f"field {where!r} is a {base}: {len(text)} characters")
         return text
     return value
 
@@ -79,16 +80,16 @@ def fill_message(msg: Any, values: Any, stamps: list[Callable[[Any], None]] | No
     if not isinstance(values, dict):
         example = next(iter(msg.get_fields_and_field_types()), "field")
         what = f"field {prefix.rstrip('.')!r} is a {kind}" if prefix else f"the values fill a {kind}"
-        raise ValueError(f"{what}: give a dictionary of its fields, e.g. '{{{example}: ...}}', "
+        raise InputError(f"{what}: give a dictionary of its fields, e.g. '{{{example}: ...}}', "
                          f"got {values!r}")
     fields = msg.get_fields_and_field_types()
     for key, value in values.items():
         where = prefix + str(key)
         if key not in fields:
-            raise ValueError(f"no field {where!r} in {kind} (its fields: {', '.join(fields) or 'none'})")
+            raise InputError(f"no field {where!r} in {kind} (its fields: {', '.join(fields) or 'none'})")
         base, is_array, size, exact = _element(fields[key])
         if is_array and not isinstance(value, list):
-            raise ValueError(f"field {where!r} is a {fields[key]}, got {value!r} (give a list)")
+            raise InputError(f"field {where!r} is a {fields[key]}, got {value!r} (give a list)")
         if is_array:
             _check_size(value, fields[key], size, exact, where)
         if "/" not in base:  # primitive
@@ -99,7 +100,7 @@ def fill_message(msg: Any, values: Any, stamps: list[Callable[[Any], None]] | No
             try:
                 setattr(msg, key, value)
             except (AssertionError, TypeError, ValueError, OverflowError) as exc:
-                raise ValueError(f"field {where!r} ({fields[key]}) cannot be {value!r}: "
+                raise InputError(f"field {where!r} ({fields[key]}) cannot be {value!r}: "
                                  f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
         elif is_array:
             cls = message_class(base)
@@ -107,7 +108,7 @@ def fill_message(msg: Any, values: Any, stamps: list[Callable[[Any], None]] | No
             try:
                 setattr(msg, key, items)
             except (AssertionError, TypeError, ValueError) as exc:
-                raise ValueError(f"field {where!r} ({fields[key]}) cannot hold {len(items)} items: "
+                raise InputError(f"field {where!r} ({fields[key]}) cannot hold {len(items)} items: "
                                  f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
         elif value == STAMP_NOW and base == "builtin_interfaces/Time":
             stamps.append(lambda t, m=msg, k=key: setattr(m, k, t))
@@ -133,15 +134,15 @@ def build_message(type_name: str, text: str) -> tuple[type, Any, list[Callable[[
     try:
         cls = message_class(type_name)
     except ToolError as exc:
-        raise ValueError(str(exc)) from None
+        raise InputError(str(exc)) from None
     try:
         values = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise ValueError(f"the values are not YAML: {str(exc).splitlines()[0]}") from None
+        raise InputError(f"the values are not YAML: {str(exc).splitlines()[0]}") from None
     if values is None:
         values = {}
     if not isinstance(values, dict):
-        raise ValueError(f"the values need to be a dictionary in YAML format, e.g. '{{field: value}}', "
+        raise InputError(f"the values need to be a dictionary in YAML format, e.g. '{{field: value}}', "
                          f"got {text!r}")
     stamps: list[Callable[[Any], None]] = []
     return cls, fill_message(cls(), values, stamps), stamps
@@ -157,7 +158,7 @@ def qos_profile(preset: str = "default", reliability: str | None = None, durabil
         try:
             return kind.get_from_short_key(key)
         except (KeyError, ValueError):
-            raise ValueError(f"{flag} {key!r} is not one of: {', '.join(kind.short_keys())}") from None
+            raise InputError(f"{flag} {key!r} is not one of: {', '.join(kind.short_keys())}") from None
 
     shared = pick(q.QoSPresetProfiles, preset, "--qos-profile")  # copied: the preset is rclpy's own
     profile = q.QoSProfile(**{k.lstrip("_"): getattr(shared, k.lstrip("_")) for k in q.QoSProfile.__slots__})

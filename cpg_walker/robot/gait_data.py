@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpg_walker.errors import InputError
 from cpg_walker.robot.joints import JOINT_NAMES, LEG_JOINTS
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
@@ -121,50 +122,50 @@ def _parse_gait(raw: bytes, path: Path, name: str, min_rows: int) -> Gait:
     """The Gait in ``raw`` (the bytes of ``path``), with read-only arrays: `load_gait` shares it."""
     lines = raw.decode("utf-8").splitlines()
     if not lines or not lines[0].strip():
-        raise ValueError(f"{path}:1: empty file; expected a header 'time_s,<joint>,...'")
+        raise InputError(f"{path}:1: empty file; expected a header 'time_s,<joint>,...'")
     header = [h.strip() for h in lines[0].split(",")]
     if header[0] != "time_s":
-        raise ValueError(f"{path}:1: the first header field must be 'time_s', got {header[0]!r}")
+        raise InputError(f"{path}:1: the first header field must be 'time_s', got {header[0]!r}")
     names = header[1:]
     if not names:
-        raise ValueError(f"{path}:1: the header names no joint")
+        raise InputError(f"{path}:1: the header names no joint")
     for n in names:
         if n not in JOINT_NAMES:
             known = ", ".join(JOINT_NAMES)
-            raise ValueError(f"{path}:1: unknown joint {n!r} in the header (HOAP-2 joints: {known})")
+            raise InputError(f"{path}:1: unknown joint {n!r} in the header (HOAP-2 joints: {known})")
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise ValueError(f"{path}:1: duplicate joint column(s) {', '.join(dup)}")
+        raise InputError(f"{path}:1: duplicate joint column(s) {', '.join(dup)}")
     rows: list[list[float]] = []
     while len(lines) > 1 and not lines[-1].strip():
         lines.pop()  # trailing blank lines
     for lineno, line in enumerate(lines[1:], start=2):
         if not line.strip():
-            raise ValueError(f"{path}:{lineno}: blank line inside the data")
+            raise InputError(f"{path}:{lineno}: blank line inside the data")
         fields = line.split(",")
         if len(fields) != len(header):
-            raise ValueError(f"{path}:{lineno}: {len(fields)} fields, the header has {len(header)}")
+            raise InputError(f"{path}:{lineno}: {len(fields)} fields, the header has {len(header)}")
         try:
             values = [float(f) for f in fields]
         except ValueError:
             bad = next(f for f in fields if not _is_float(f))
-            raise ValueError(f"{path}:{lineno}: not a number: {bad.strip()!r}") from None
+            raise InputError(f"{path}:{lineno}: not a number: {bad.strip()!r}") from None
         if not all(math.isfinite(v) for v in values):
-            raise ValueError(f"{path}:{lineno}: non-finite value (nan/inf)")
+            raise InputError(f"{path}:{lineno}: non-finite value (nan/inf)")
         rows.append(values)
     if len(rows) < min_rows:
-        raise ValueError(f"{path}:{len(lines) + 1}: only {len(rows)} data row(s); need at least {min_rows}")
+        raise InputError(f"{path}:{len(lines) + 1}: only {len(rows)} data row(s); need at least {min_rows}")
     data = np.asarray(rows)
     t = data[:, 0]
     steps = np.diff(t)
     if np.any(steps <= 0):
         i = int(np.argmax(steps <= 0))
-        raise ValueError(f"{path}:{i + 3}: time {t[i + 1]:g} s does not increase (previous {t[i]:g} s)")
+        raise InputError(f"{path}:{i + 3}: time {t[i + 1]:g} s does not increase (previous {t[i]:g} s)")
     dt = float(np.median(steps))
     off = np.abs(steps - dt) > 0.01 * dt + 1e-9
     if np.any(off):
         i = int(np.argmax(off))
-        raise ValueError(f"{path}:{i + 3}: non-uniform sampling: step {steps[i]:g} s, expected {dt:g} s")
+        raise InputError(f"{path}:{i + 3}: non-uniform sampling: step {steps[i]:g} s, expected {dt:g} s")
     t = t - t[0]
     q = data[:, 1:]
     t.setflags(write=False)
@@ -198,7 +199,7 @@ def estimate_period(gait: Gait, settle: float | None = None, lo: float = 1.5, hi
     (default: the second half of the recording's first 60 %), searched in [lo, hi]."""
     legs = [gait.names.index(j) for j in LEG_JOINTS if j in gait.names]
     if not legs:
-        raise ValueError(f"{gait.source}: no leg joints in the recording; cannot find a gait cycle")
+        raise InputError(f"{gait.source}: no leg joints in the recording; cannot find a gait cycle")
     start = int((settle if settle is not None else 0.25 * gait.duration) / gait.dt)
     q = gait.q[start:, legs]
     q = q - q.mean(0)
@@ -209,7 +210,7 @@ def estimate_period(gait: Gait, settle: float | None = None, lo: float = 1.5, hi
         if c > best:
             best, best_lag = c, lag
     if best_lag is None or best < 0.8:
-        raise ValueError(
+        raise InputError(
             f"{gait.source}: no periodic gait found between {lo} and {hi} s (best correlation {best:.2f})"
         )
     return best_lag * gait.dt

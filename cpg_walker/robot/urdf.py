@@ -30,6 +30,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from cpg_walker.errors import InputError
 from cpg_walker.robot.frames import SITE_FRAMES, link_name
 from cpg_walker.robot.hoap2 import MODEL_PATH
 from cpg_walker.robot.joints import MAX_VELOCITY_RADS
@@ -88,7 +89,7 @@ def _shapes(model: mujoco.MjModel, g: int) -> list[tuple[ET.Element, np.ndarray,
     elif kind in (_GEOM.mjGEOM_CYLINDER, _GEOM.mjGEOM_CAPSULE):
         ET.SubElement(geometry, "cylinder", radius=_num(size[0]), length=_num(2 * size[1]))
     else:
-        raise ValueError(f"urdf: geom {_name(model, _OBJ.mjOBJ_GEOM, g)!r} of body "
+        raise InputError(f"urdf: geom {_name(model, _OBJ.mjOBJ_GEOM, g)!r} of body "
                          f"{_name(model, _OBJ.mjOBJ_BODY, int(model.geom_bodyid[g]))!r} has type "
                          f"{_GEOM(kind).name}; only box, sphere, cylinder and capsule have a URDF shape")
     out = [(geometry, pos, quat)]
@@ -106,7 +107,7 @@ def _joint_limit(model: mujoco.MjModel, j: int) -> dict[str, str]:
     acts = [a for a in range(model.nu)
             if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and model.actuator_trnid[a, 0] == j]
     if not acts:
-        raise ValueError(f"urdf: joint {_name(model, _OBJ.mjOBJ_JOINT, j)!r} has no motor: no effort limit")
+        raise InputError(f"urdf: joint {_name(model, _OBJ.mjOBJ_JOINT, j)!r} has no motor: no effort limit")
     effort = 0.0
     for a in acts:
         torque = abs(model.actuator_gear[a, 0]) * np.abs(model.actuator_ctrlrange[a]).max()
@@ -151,17 +152,17 @@ def _joint(model: mujoco.MjModel, b: int) -> ET.Element:
     child = link_name(_name(model, _OBJ.mjOBJ_BODY, b))
     n = int(model.body_jntnum[b])
     if n > 1:
-        raise ValueError(f"urdf: body {child!r} has {n} joints; a URDF link has one joint to its parent")
+        raise InputError(f"urdf: body {child!r} has {n} joints; a URDF link has one joint to its parent")
     if n == 0:
         joint = ET.Element("joint", name=f"{child}_joint", type="fixed")
     else:
         j = int(model.body_jntadr[b])
         name = _name(model, _OBJ.mjOBJ_JOINT, j)
         if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE:
-            raise ValueError(f"urdf: joint {name!r} is a {mujoco.mjtJoint(model.jnt_type[j]).name}; only "
+            raise InputError(f"urdf: joint {name!r} is a {mujoco.mjtJoint(model.jnt_type[j]).name}; only "
                              "hinges (and the free root joint) are supported")
         if np.any(model.jnt_pos[j] != 0):
-            raise ValueError(f"urdf: joint {name!r} is not at its body's origin (pos {model.jnt_pos[j]}); "
+            raise InputError(f"urdf: joint {name!r} is not at its body's origin (pos {model.jnt_pos[j]}); "
                              "a URDF joint sits at its child link's frame")
         joint = ET.Element("joint", name=name, type="revolute" if model.jnt_limited[j] else "continuous")
     _origin(joint, model.body_pos[b], model.body_quat[b])
@@ -183,7 +184,7 @@ def urdf_from_model(model: mujoco.MjModel, name: str = ROBOT_NAME, source: str =
     roots = [b for b in range(1, model.nbody) if model.body_parentid[b] == 0]
     if len(roots) != 1:
         names = [_name(model, _OBJ.mjOBJ_BODY, b) for b in roots]
-        raise ValueError(f"urdf: the model needs exactly one body under the world (the floating base), "
+        raise InputError(f"urdf: the model needs exactly one body under the world (the floating base), "
                          f"has {names}")
     root = roots[0]
     robot = ET.Element("robot", name=name)
@@ -198,7 +199,7 @@ def urdf_from_model(model: mujoco.MjModel, name: str = ROBOT_NAME, source: str =
     for frame, (body, site) in site_frames.items():
         s = mujoco.mj_name2id(model, _OBJ.mjOBJ_SITE, site)
         if s < 0 or _name(model, _OBJ.mjOBJ_BODY, int(model.site_bodyid[s])) != body:
-            raise ValueError(f"urdf: frame {frame!r} needs site {site!r} on body {body!r}")
+            raise InputError(f"urdf: frame {frame!r} needs site {site!r} on body {body!r}")
         links.append(ET.Element("link", name=frame))
         joint = ET.Element("joint", name=f"{frame}_joint", type="fixed")
         _origin(joint, model.site_pos[s], model.site_quat[s])
@@ -215,8 +216,16 @@ def urdf_from_model(model: mujoco.MjModel, name: str = ROBOT_NAME, source: str =
 
 
 def generate(model_path: str | Path = MODEL_PATH) -> str:
-    """The URDF of the MJCF at ``model_path`` (default: the package's hoap2.xml)."""
-    return urdf_from_model(mujoco.MjModel.from_xml_path(str(model_path)), source=Path(model_path).name)
+    """The URDF of the MJCF at ``model_path`` (default: the package's hoap2.xml). A file MuJoCo cannot load,
+    or a model a URDF cannot describe: InputError naming the file (and MuJoCo's line)."""
+    try:
+        model = mujoco.MjModel.from_xml_path(str(model_path))
+    except ValueError as exc:  # MuJoCo's XML parse / compile error
+        raise InputError(f"{model_path}: not a loadable MJCF model: {' '.join(str(exc).split())}") from None
+    try:
+        return urdf_from_model(model, source=Path(model_path).name)
+    except InputError as exc:
+        raise InputError(f"{model_path}: {exc}") from None
 
 
 def read_urdf() -> str:

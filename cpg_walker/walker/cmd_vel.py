@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cpg_walker.errors import InputError
+
 #: keys of a CmdVelLimits (and of cpg_node's ``cmd_vel.<key>`` parameters)
 LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand_below", "alpha_fall_rate")
 
@@ -40,7 +42,7 @@ LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand
 def _read_yaml(path: str | Path | None, default: str) -> tuple[dict, Path]:
     import yaml
 
-    from cpg_walker.paths import config_path
+    from cpg_walker.paths import config_path, yaml_error
 
     p = Path(path) if path else config_path(default)
     if not p.is_file() and path and not Path(path).is_absolute():
@@ -49,11 +51,14 @@ def _read_yaml(path: str | Path | None, default: str) -> tuple[dict, Path]:
         except FileNotFoundError:
             pass
     if not p.is_file():
-        raise FileNotFoundError(f"speed map file not found: {path}")
+        raise InputError(f"speed map file not found: {path}")
     with open(p, encoding="utf-8") as fh:
-        d = yaml.safe_load(fh) or {}
+        try:
+            d = yaml.safe_load(fh) or {}
+        except yaml.YAMLError as exc:
+            raise InputError(yaml_error(p, exc)) from None
     if not isinstance(d, dict):
-        raise ValueError(f"{p}: expected a mapping")
+        raise InputError(f"{p}: expected a mapping")
     return d, p
 
 
@@ -62,9 +67,9 @@ def _pairs(d: dict, key: str, where: str) -> np.ndarray:
     try:
         a = np.asarray(v, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{where}.{key}: expected a list of [x, speed] pairs, got {v!r}") from None
+        raise InputError(f"{where}.{key}: expected a list of [x, speed] pairs, got {v!r}") from None
     if a.ndim != 2 or a.shape[1] != 2 or len(a) < 1 or not np.all(np.isfinite(a)):
-        raise ValueError(f"{where}.{key}: expected a non-empty list of finite [x, speed] pairs, got {v!r}")
+        raise InputError(f"{where}.{key}: expected a non-empty list of finite [x, speed] pairs, got {v!r}")
     return a[np.argsort(np.abs(a[:, 0]))]
 
 
@@ -128,7 +133,7 @@ class SpeedMap:
         self.origin = origin
         slow = data.get("slow_abs_zeta", 1.0)
         if isinstance(slow, bool) or not isinstance(slow, (int, float)) or not (0 < slow <= 2):
-            raise ValueError(f"{origin}: slow_abs_zeta must be in (0, 2], got {slow!r}")
+            raise InputError(f"{origin}: slow_abs_zeta must be in (0, 2], got {slow!r}")
         self.slow_abs_zeta = float(slow)
         self.meta = {k: v for k, v in data.items() if k not in ("slow_abs_zeta", "forward", "backward")}
         self.forward = self._branch(data, "forward", 1.0)
@@ -138,17 +143,17 @@ class SpeedMap:
         where = f"{self.origin}: {key}"
         d = data.get(key)
         if not isinstance(d, dict):
-            raise ValueError(f"{where}: missing (a mapping with zeta_speed and alpha_speed)")
+            raise InputError(f"{where}: missing (a mapping with zeta_speed and alpha_speed)")
         z, a = _pairs(d, "zeta_speed", where), _pairs(d, "alpha_speed", where)
         rel = "> 0" if sign > 0 else "< 0"
         if np.any(np.sign(z[:, 0]) != sign) or np.any(np.sign(z[:, 1]) != sign):
-            raise ValueError(f"{where}.zeta_speed: every zeta and speed must be {rel}")
+            raise InputError(f"{where}.zeta_speed: every zeta and speed must be {rel}")
         if np.any(np.sign(a[:, 1]) != sign) or np.any(a[:, 0] <= 0) or np.any(a[:, 0] >= 1):
-            raise ValueError(f"{where}.alpha_speed: alpha in (0, 1), speeds {rel}")
+            raise InputError(f"{where}.alpha_speed: alpha in (0, 1), speeds {rel}")
         s = self.slow_abs_zeta
         z = z[np.abs(z[:, 0]) >= s - 1e-9]
         if len(z) < 1 or abs(abs(z[0, 0]) - s) > 1e-9:
-            raise ValueError(f"{where}.zeta_speed: needs the point at zeta = {sign * s:g}")
+            raise InputError(f"{where}.zeta_speed: needs the point at zeta = {sign * s:g}")
         c = np.concatenate([a[:, 0] * s, np.abs(z[:, 0])])
         c, v = monotone(c, np.abs(np.concatenate([a[:, 1], z[:, 1]])))
         return Branch(sign, s, c, v)
@@ -229,7 +234,7 @@ class CmdVelLimits:
         d.update(overrides)
         missing = [k for k, v in d.items() if v is None]
         if missing:
-            raise ValueError(f"cmd_vel limits: missing {missing} in {path or 'config/cpg.yaml'}")
+            raise InputError(f"cmd_vel limits: missing {missing} in {path or 'config/cpg.yaml'}")
         return cls(**{k: float(v) for k, v in d.items()})
 
     def clamp_linear(self, v: float) -> float:

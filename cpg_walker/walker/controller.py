@@ -58,6 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.cpg.network import MAX_RATE_STEP, CPGNetwork, CPGParams
+from cpg_walker.errors import InputError
 from cpg_walker.robot.joints import CONTROLLED_JOINTS, PAPER_LEG_DOFS, SIDES
 
 DOFS: tuple[str, ...] = CONTROLLED_JOINTS
@@ -124,12 +125,12 @@ class HumanoidSettings:
         known = cls.__dataclass_fields__
         unknown, missing = sorted(set(d) - set(known)), sorted(set(known) - set(d))
         if unknown or missing:
-            raise ValueError(f"{where}: humanoid settings: unknown key(s) {unknown}, "
+            raise InputError(f"{where}: humanoid settings: unknown key(s) {unknown}, "
                              f"missing key(s) {missing}")
         try:
             return cls(**{k: (int(v) if known[k].type == "int" else float(v)) for k, v in d.items()})
         except (TypeError, ValueError) as exc:
-            raise ValueError(f"{where}: humanoid settings: {exc}") from None
+            raise InputError(f"{where}: humanoid settings: {exc}") from None
 
     def __post_init__(self) -> None:
         if not isinstance(self.n_oscillators, (int, np.integer)) or self.n_oscillators < 1:

@@ -53,6 +53,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from cpg_walker.cpg.hopf import phase
+from cpg_walker.errors import InputError
 from cpg_walker.robot.contact import TouchdownDetector
 from cpg_walker.robot.hoap2 import tilt_from_quat
 from cpg_walker.robot.joints import CONTROLLED_JOINTS, PAPER_LEG_DOFS, SIDES
@@ -117,35 +118,35 @@ class FeedbackConfig:
 
     def __post_init__(self) -> None:
         if self.lateral_mode not in ("abs", "signed"):
-            raise ValueError(f"lateral_mode must be 'abs' or 'signed', got {self.lateral_mode!r}")
+            raise InputError(f"lateral_mode must be 'abs' or 'signed', got {self.lateral_mode!r}")
         if self.heading_reference not in ("handover", "start"):
-            raise ValueError(f"heading_reference must be 'handover' or 'start', "
+            raise InputError(f"heading_reference must be 'handover' or 'start', "
                              f"got {self.heading_reference!r}")
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name in ("lateral_mode", "heading_reference"):
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"{f.name} must be a finite number, got {v!r}")
+                raise InputError(f"{f.name} must be a finite number, got {v!r}")
         for name in ("reset_strength", "reset_both_strength"):
             if not (0.0 < getattr(self, name) <= 1.0):
-                raise ValueError(f"{name} must be in (0, 1], got {getattr(self, name)}")
+                raise InputError(f"{name} must be in (0, 1], got {getattr(self, name)}")
         for name in ("gain_scale", "g_limit", "tilt_time_constant_s", "heading_gain", "heading_limit_rad",
                      "heading_time_constant_s", "reset_min_abs_zeta", "reset_min_alpha"):
             if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.heading_limit_rad > 0.5:
-            raise ValueError(f"heading_limit_rad must be <= 0.5 rad (hip-yaw offsets), "
+            raise InputError(f"heading_limit_rad must be <= 0.5 rad (hip-yaw offsets), "
                              f"got {self.heading_limit_rad}")
         if abs(self.lateral_sign) != 1.0:
-            raise ValueError(f"lateral_sign must be +1 or -1, got {self.lateral_sign}")
+            raise InputError(f"lateral_sign must be +1 or -1, got {self.lateral_sign}")
         for name in ("reset_phase_rad", "reset_phase_backward_rad"):
             if abs(getattr(self, name)) > math.pi:
-                raise ValueError(f"{name} must be in [-pi, pi], got {getattr(self, name)}")
+                raise InputError(f"{name} must be in [-pi, pi], got {getattr(self, name)}")
         for name in (f"amp_{w}slope_{j}" for w in ("", "slow_")
                      for j in ("hip1", "hip2", "knee", "ankle1", "ankle2")):
             if abs(getattr(self, name)) > 2.0:
-                raise ValueError(f"{name} must be in [-2, 2], got {getattr(self, name)}")
+                raise InputError(f"{name} must be in [-2, 2], got {getattr(self, name)}")
 
     @classmethod
     def load(cls, path: str | None = None, **overrides: object) -> FeedbackConfig:
@@ -154,11 +155,11 @@ class FeedbackConfig:
         known = {f.name for f in fields(cls)}
         unknown = sorted((set(d) | set(overrides)) - known)
         if unknown:
-            raise ValueError(f"{p}: unknown key(s) {unknown}")
+            raise InputError(f"{p}: unknown key(s) {unknown}")
         d.update(overrides)
         missing = sorted(known - set(d))
         if missing:
-            raise ValueError(f"{p}: missing key(s) {missing}")
+            raise InputError(f"{p}: missing key(s) {missing}")
         return cls(**d)
 
 
@@ -171,20 +172,20 @@ def _read_yaml(path: str | None) -> tuple[dict, str]:
     with open(p, encoding="utf-8") as fh:
         d = yaml.safe_load(fh) or {}
     if not isinstance(d, dict):
-        raise ValueError(f"{p}: expected a mapping")
+        raise InputError(f"{p}: expected a mapping")
     return d, str(p)
 
 
 def check_pathways(names: object) -> tuple[str, ...]:
     """The validated pathway tuple (unknown names, and "reset" with "reset_both", are refused)."""
     if isinstance(names, str):
-        raise ValueError(f"feedback pathways must be a list of names, got the string {names!r}")
+        raise InputError(f"feedback pathways must be a list of names, got the string {names!r}")
     names = tuple(names)  # type: ignore[arg-type]
     bad = [p for p in names if p not in PATHWAYS]
     if bad:
-        raise ValueError(f"unknown feedback pathway(s) {bad}; choose from {list(PATHWAYS)}")
+        raise InputError(f"unknown feedback pathway(s) {bad}; choose from {list(PATHWAYS)}")
     if "reset" in names and "reset_both" in names:
-        raise ValueError("feedback pathways 'reset' and 'reset_both' both reset at right touchdown: "
+        raise InputError("feedback pathways 'reset' and 'reset_both' both reset at right touchdown: "
                          "choose one")
     return tuple(dict.fromkeys(names))
 
@@ -193,7 +194,7 @@ def default_pathways(path: str | None = None) -> tuple[str, ...]:
     """The pathways feedback "on" closes by default: config/feedback.yaml's ``pathways``."""
     d, p = _read_yaml(path)
     if "pathways" not in d:
-        raise ValueError(f"{p}: missing key 'pathways'")
+        raise InputError(f"{p}: missing key 'pathways'")
     return check_pathways(d["pathways"])
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import yaml
 
 from cpg_walker.cpg.network import CPGParams
+from cpg_walker.errors import InputError
 from cpg_walker.paths import config_path, ros_parameters
 from cpg_walker.walker.controller import HumanoidCPG, HumanoidSettings
 
@@ -36,7 +37,7 @@ def load_learning_config(path: str | Path | None = None) -> dict:
     with open(path, encoding="utf-8") as fh:
         cfg = yaml.safe_load(fh)
     if not isinstance(cfg, dict) or "humanoid" not in cfg or "cpg" not in cfg:
-        raise ValueError(f"{path}: expected 'cpg' and 'humanoid' sections")
+        raise InputError(f"{path}: expected 'cpg' and 'humanoid' sections")
     return cfg
 
 
@@ -74,7 +75,7 @@ def load_controller(cpg_file: str | Path | None,
         path = resolve_cpg_file(cpg_file)
         ctrl = HumanoidCPG.load(path)  # ValueError naming the file and the bad field if corrupt
         if n_oscillators is not None and ctrl.net.N != n_oscillators:
-            raise ValueError(f"{path} has {ctrl.net.N} oscillators per DOF, {n_oscillators} were asked for")
+            raise InputError(f"{path} has {ctrl.net.N} oscillators per DOF, {n_oscillators} were asked for")
         return ctrl, str(path), bool(ctrl.meta.get("learning", {}).get("converged", True))
     cfg = load_learning_config()
     settings, params = learning_settings(n_oscillators, cfg)

@@ -18,6 +18,7 @@ from typing import Protocol
 
 import numpy as np
 
+from cpg_walker.errors import InputError
 from cpg_walker.paths import ros_parameters
 from cpg_walker.robot.contact import TouchdownDetector
 from cpg_walker.robot.hoap2 import Hoap2Sim
@@ -234,11 +235,11 @@ def recording_setup(gait: str = "walk", data: str | None = None, duration: float
     if duration is None:
         duration = max(30.0, recording.duration)
     if not (duration > 0):
-        raise ValueError(f"--duration must be positive, got {duration}")
+        raise InputError(f"--duration must be positive, got {duration}")
     try:
         cycle = find_steady_cycle(recording)
     except ValueError as exc:
         if need_cycle and duration > recording.duration:
-            raise ValueError(f"cannot continue past the recording's end: {exc}") from None
+            raise InputError(f"cannot continue past the recording's end: {exc}") from None
         cycle = Cycle(start=0.0, period=recording.duration + 1.0, mismatch_rad=float("nan"))
     return recording, duration, cycle

@@ -11,6 +11,7 @@ import numpy as np
 import yaml
 
 from cpg_walker.cpg.network import CPGParams
+from cpg_walker.errors import InputError
 from cpg_walker.paths import yaml_error
 from cpg_walker.walker.controller import CHAIN, DOFS, HIP2_PAIR, LEG_PHASE, B, HumanoidCPG, HumanoidSettings
 
@@ -68,65 +69,65 @@ def load(path: str | Path) -> HumanoidCPG:
     try:
         d = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
-        raise ValueError(yaml_error(path, exc)) from None
+        raise InputError(yaml_error(path, exc)) from None
     return from_dict(d, str(path))
 
 
 def _require(d: dict, key: str, where: str, kind: type | tuple[type, ...]) -> object:
     if not isinstance(d, dict):
-        raise ValueError(f"{where}: expected a mapping")
+        raise InputError(f"{where}: expected a mapping")
     if key not in d:
-        raise ValueError(f"{where}: missing key '{key}'")
+        raise InputError(f"{where}: missing key '{key}'")
     v = d[key]
     if kind is float:
         kind = (int, float)
     if not isinstance(v, kind) or (isinstance(v, bool) and kind is not bool):
-        raise ValueError(f"{where}.{key}: expected {getattr(kind, '__name__', 'a number')}, got {v!r}")
+        raise InputError(f"{where}.{key}: expected {getattr(kind, '__name__', 'a number')}, got {v!r}")
     return v
 
 
 def _numbers(v: object, n: int, where: str) -> np.ndarray:
     if not isinstance(v, list):
-        raise ValueError(f"{where}: expected a list of {n} numbers, got {type(v).__name__}")
+        raise InputError(f"{where}: expected a list of {n} numbers, got {type(v).__name__}")
     if len(v) != n:
-        raise ValueError(f"{where}: has {len(v)} values, expected {n} (n_oscillators)")
+        raise InputError(f"{where}: has {len(v)} values, expected {n} (n_oscillators)")
     if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-        raise ValueError(f"{where}: every value must be a number, got {v!r}")
+        raise InputError(f"{where}: every value must be a number, got {v!r}")
     arr = np.array(v, dtype=float)
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{where}: contains NaN or infinite values")
+        raise InputError(f"{where}: contains NaN or infinite values")
     return arr
 
 
 def from_dict(d: object, where: str = "CPG file") -> HumanoidCPG:
     """A learned controller from the YAML mapping, every field checked (errors name the key)."""
     if not isinstance(d, dict):
-        raise ValueError(f"{where}: expected a YAML mapping at the top level, got {type(d).__name__}")
+        raise InputError(f"{where}: expected a YAML mapping at the top level, got {type(d).__name__}")
     ver = _require(d, "schema_version", where, int)
     if ver != SCHEMA_VERSION:
-        raise ValueError(f"{where}: schema_version {ver} is not supported (this code reads "
+        raise InputError(f"{where}: schema_version {ver} is not supported (this code reads "
                          f"{SCHEMA_VERSION}); re-run 'cpg-walker learn'")
     N = _require(d, "n_oscillators", where, int)
     if N < 1:
-        raise ValueError(f"{where}.n_oscillators: must be >= 1, got {N}")
+        raise InputError(f"{where}.n_oscillators: must be >= 1, got {N}")
     ts = float(_require(d, "time_scale", where, float))
     if not (math.isfinite(ts) and ts > 0):
-        raise ValueError(f"{where}.time_scale: must be a positive number, got {ts}")
+        raise InputError(f"{where}.time_scale: must be a positive number, got {ts}")
     cp = _require(d, "cpg_params", where, dict)
     params = CPGParams(**{k: float(_require(cp, k, f"{where}.cpg_params", float))
                           for k in ("mu", "gamma", "epsilon", "eta", "tau")}, amplitude_time_constant=0.0)
     chain = _require(d, "chain", where, list)
     expected_chain = [[DOFS[c], DOFS[q]] for c, q in CHAIN]
     if chain != expected_chain:
-        raise ValueError(f"{where}.chain: {chain!r} is not this controller's coupling {expected_chain!r}")
+        raise InputError(f"{where}.chain: {chain!r} is not this controller's coupling {expected_chain!r}")
     leg = _require(d, "leg_coupling", where, dict)
     if _require(leg, "pair", f"{where}.leg_coupling", list) != [DOFS[i] for i in HIP2_PAIR]:
-        raise ValueError(f"{where}.leg_coupling.pair: must be {[DOFS[i] for i in HIP2_PAIR]}")
+        raise InputError(f"{where}.leg_coupling.pair: must be {[DOFS[i] for i in HIP2_PAIR]}")
     if float(_require(leg, "phase", f"{where}.leg_coupling", float)) != float(LEG_PHASE):
-        raise ValueError(f"{where}.leg_coupling.phase: must be pi ({LEG_PHASE!r})")
+        raise InputError(f"{where}.leg_coupling.phase: must be pi ({LEG_PHASE!r})")
     settings = HumanoidSettings.from_mapping(_require(d, "settings", where, dict), f"{where}.settings")
     if settings.n_oscillators != N:
-        raise ValueError(f"{where}.settings.n_oscillators ({settings.n_oscillators}) != n_oscillators ({N})")
+        raise InputError(f"{where}.settings.n_oscillators ({settings.n_oscillators}) != n_oscillators ({N})")
     teaching = _require(d, "teaching", where, dict)
     for k in ("gait", "cycle_start_s", "cycle_period_s", "recorded_gait_frequency_hz"):
         _require(teaching, k, f"{where}.teaching", str if k == "gait" else float)
@@ -134,7 +135,7 @@ def from_dict(d: object, where: str = "CPG file") -> HumanoidCPG:
     dofs = _require(d, "dofs", where, dict)
     extra = sorted(set(dofs) - set(DOFS))
     if extra:
-        raise ValueError(f"{where}.dofs: unknown DOF(s) {extra}; expected {list(DOFS)}")
+        raise InputError(f"{where}.dofs: unknown DOF(s) {extra}; expected {list(DOFS)}")
     arrays = {k: np.empty((B, N)) for k in ("omega", "alpha", "phi", "x0", "y0")}
     offset, gain = np.empty(B), np.empty(B)
     for b, name in enumerate(DOFS):
@@ -143,11 +144,11 @@ def from_dict(d: object, where: str = "CPG file") -> HumanoidCPG:
         offset[b] = float(_require(entry, "offset", w, float))
         gain[b] = float(_require(entry, "gain", w, float))
         if not (math.isfinite(offset[b]) and math.isfinite(gain[b]) and gain[b] != 0):
-            raise ValueError(f"{w}: offset must be finite and gain finite and non-zero")
+            raise InputError(f"{w}: offset must be finite and gain finite and non-zero")
         for k in arrays:
             arrays[k][b] = _numbers(_require(entry, k, w, list), N, f"{w}.{k}")
         if np.any(arrays["omega"][b] <= 0):
-            raise ValueError(f"{w}.omega: learned frequencies must be > 0")
+            raise InputError(f"{w}.omega: learned frequencies must be > 0")
     net = HumanoidCPG.build_network(arrays["omega"], params, ts, offset, gain, alpha0=arrays["alpha"],
                             phi0=arrays["phi"], x0=arrays["x0"], y0=arrays["y0"])
     net.freeze()
