@@ -28,27 +28,34 @@ NODE_PARAMS = {"sim_node": {"lockstep_resend": 0.02}, "pid_node": {"startup_wait
 RELAY = ros_parameters("relay.yaml", "relay")
 
 
-@pytest.fixture(scope="module")
-def walk(tmp_path_factory):
-    """The relayed walk, once for the module, on a domain of its own."""
+def _relayed_walk(tmp_path_factory, name: str, duration: float, pacing: str, link: dict,
+                  node_params: dict) -> SimpleNamespace:
+    """A CPG walk (zeta 1, feedback on) through relay_node with ``link``, on a domain of its own."""
     from ros_helpers import kill_nodes, reserve_domain, sim_deadline
 
     import cpg_walker.nodes.graph as graph_module
     from cpg_walker.experiments.walk_graph import run_graph_walk
 
-    out = tmp_path_factory.mktemp("transport")
+    out = tmp_path_factory.mktemp(name)
     domain, lock = reserve_domain()
     try:
         with pytest.MonkeyPatch.context() as mp:
             mp.setattr(graph_module, "quiet_domain_id", lambda attempts=5: domain)
-            report = run_graph_walk(out, duration=DURATION_S, pacing="lockstep", zeta=1.0, feedback=True,
-                                    relay={"loss": LOSS, "delay": DELAY_S, "jitter": JITTER_S, "seed": 7},
-                                    node_params=NODE_PARAMS, timeout=sim_deadline(DURATION_S))
+            report = run_graph_walk(out, duration=duration, pacing=pacing, zeta=1.0, feedback=True,
+                                    relay={**link, "seed": 7}, node_params=node_params,
+                                    timeout=sim_deadline(duration))
     finally:
         left = kill_nodes(domain)
         lock.close()
     logs = {p.stem: p.read_text(errors="replace") for p in (out / "graph_logs").glob("*.log")}
-    return SimpleNamespace(report=report, left=left, logs=logs)
+    return SimpleNamespace(report=report, left=left, logs=logs, out=out)
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory):
+    """The relayed lockstep walk, once for the module."""
+    return _relayed_walk(tmp_path_factory, "transport", DURATION_S, "lockstep",
+                         {"loss": LOSS, "delay": DELAY_S, "jitter": JITTER_S}, NODE_PARAMS)
 
 
 @pytest.mark.ros
@@ -100,26 +107,9 @@ RT_MIN_CPG_DISTANCE_M = 0.3
 @pytest.fixture(scope="module")
 def realtime_walk(tmp_path_factory):
     """The relayed walk in realtime pacing, well past the CPG hand-over, once for the module."""
-    from ros_helpers import kill_nodes, reserve_domain, sim_deadline
-
-    import cpg_walker.nodes.graph as graph_module
-    from cpg_walker.experiments.walk_graph import run_graph_walk
-
-    out = tmp_path_factory.mktemp("transport_rt")
-    domain, lock = reserve_domain()
-    try:
-        with pytest.MonkeyPatch.context() as mp:
-            mp.setattr(graph_module, "quiet_domain_id", lambda attempts=5: domain)
-            report = run_graph_walk(out, duration=RT_DURATION_S, pacing="realtime", zeta=1.0, feedback=True,
-                                    relay={"loss": RT_LOSS, "delay": RT_DELAY_S, "jitter": RT_JITTER_S,
-                                           "seed": 7},
-                                    node_params={"pid_node": {"startup_wait": START_S}},
-                                    timeout=sim_deadline(RT_DURATION_S))
-    finally:
-        left = kill_nodes(domain)
-        lock.close()
-    logs = {p.stem: p.read_text(errors="replace") for p in (out / "graph_logs").glob("*.log")}
-    return SimpleNamespace(report=report, left=left, logs=logs, out=out)
+    return _relayed_walk(tmp_path_factory, "transport_rt", RT_DURATION_S, "realtime",
+                         {"loss": RT_LOSS, "delay": RT_DELAY_S, "jitter": RT_JITTER_S},
+                         {"pid_node": {"startup_wait": START_S}})
 
 
 @pytest.mark.ros
