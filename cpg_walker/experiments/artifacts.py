@@ -1,0 +1,51 @@
+"""Every committed result the docs quote, and the command that regenerates it (``cpg-walker results``).
+
+Each ``Artifact`` is one `cpg-walker` command run into ``docs/results/<name>/`` (its ``--out``; the
+benchmarks keep ``docs/bench``); the docs quote figures from those files, and their generated tables
+(``readme_blocks``) are checked against them by the tests. ``wall_min`` is what the run took on the project's 2-core machine, for the progress
+line; the commands themselves record their provenance (command, commit, date, load) where they can.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Artifact:
+    name: str
+    what: str
+    argv: tuple[str, ...]  # the cpg-walker command line, without --out (empty: `results` runs it itself)
+    files: tuple[str, ...]  # what it writes into its directory that is committed
+    wall_min: float  # about how long it takes on the 2-core machine (minutes)
+
+
+ARTIFACTS: tuple[Artifact, ...] = (
+    Artifact("headline", "the README's headline walks, in-process", (),
+             ("headline.json", "headline.md"), 1.0),
+    Artifact("faults", "each graph node killed and restarted while walking", ("faults",),
+             ("faults.json", "faults.md"), 1.0),
+    Artifact("fault_phases", "the PID lost at 11 phases of a stride, in-process", ("faults", "--in-process"),
+             ("fault_phases.json",), 2.0),
+    Artifact("cpg_loss", "cpg_node lost at 80 times, with and without the horizon's stop, in-process",
+             ("faults", "--cpg-loss"), ("cpg_loss.json",), 8.0),
+    Artifact("transport", "the largest loss and delay the realtime walk survives", ("transport",),
+             ("transport.json", "transport.md", "transport.png"), 17.0),
+    Artifact("soak", "10 sim minutes of walking with a change every 20 s", ("soak", "--pacing", "lockstep"),
+             ("soak.json", "soak.md"), 25.0),
+    Artifact("two_hosts", "the walk across a veth pair between two network namespaces (root)", ("two-hosts",),
+             ("two_hosts.json",), 2.0),
+    Artifact("bench", "the benchmarks (every figure beside its same-run baseline)", ("bench",),
+             ("bench.json", "bench.md", "bench_table.md", "bench_oscillators.png", "bench_robots.png"), 52.0),
+)
+
+
+#: Where an artifact lives under the results root, when not in its own <name>/ folder.
+PLACES = {"bench": "../bench"}
+
+
+def artifact(name: str) -> Artifact:
+    found = [a for a in ARTIFACTS if a.name == name]
+    if not found:
+        raise KeyError(name)
+    return found[0]
