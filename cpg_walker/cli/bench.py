@@ -22,17 +22,26 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    if args.from_json:
+    from cpg_walker.experiments.bench import headline_status
+
+    if args.from_json:  # exit 1 if a headline run in it is invalid (the tables written first)
         import json
         from pathlib import Path
 
-        from cpg_walker.experiments.bench_report import write
+        from cpg_walker.cli.main import UserError
+        from cpg_walker.experiments.bench_report import check_shape, write
 
+        try:
+            results = json.loads(Path(args.from_json).read_text())
+            check_shape(results)
+        except json.JSONDecodeError as exc:
+            raise UserError(f"--from-json {args.from_json}: not JSON ({exc})") from None
+        except (OSError, ValueError) as exc:  # missing or unreadable file, not bench.json's shape
+            raise UserError(f"--from-json {args.from_json}: {exc}") from None
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
-        write(json.loads(Path(args.from_json).read_text()), out, args.readme)
-        return 0
+        write(results, out, args.readme)
+        return headline_status(results)
     from cpg_walker.experiments.bench import run_benchmarks
 
-    run_benchmarks(args.out, only=args.only, quick=args.quick, readme=args.readme)
-    return 0
+    return headline_status(run_benchmarks(args.out, only=args.only, quick=args.quick, readme=args.readme))
