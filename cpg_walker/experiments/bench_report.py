@@ -44,11 +44,13 @@ def check_shape(results) -> None:
 
 def invalid_lines(results: dict) -> list[str]:
     """How many runs are invalid and why (markdown): they are in bench.json, in no table or plot."""
+    from cpg_walker.experiments.bench import SECTIONS
     from cpg_walker.experiments.bench_validity import invalid_runs, runs_in
 
     total, bad = len(runs_in(results)), invalid_runs(results)
     if not total:
-        return ["No run in this bench.json carries a validity check (it predates them)."]
+        ran = any(isinstance(results.get(name), dict) for name in SECTIONS)
+        return ["No run in this bench.json carries a validity check (it predates them)."] if ran else []
     if not bad:
         return [f"All {total} runs and measurement entries are valid (no fall, controller ticks, moved)."]
     return [f"{len(bad)} of {total} runs and measurement entries are invalid: kept in `bench.json` with "
@@ -195,7 +197,8 @@ def table(results: dict) -> list[str]:
              f"same run); took {m.get('wall_s', '?')} s. Every figure is in `bench.json`.", "",
              "| figure | value | baseline (same run) | ratio |", "|---|---|---|---|"]
     lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in _rows(results)]
-    lines += ["", *invalid_lines(results)]
+    invalid = invalid_lines(results)
+    lines += ["", *invalid] if invalid else []
     rt = _realtime_rows(results)
     if rt:
         s = get(results, "realtime.setup") or {}
