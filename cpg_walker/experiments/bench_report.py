@@ -180,7 +180,10 @@ def _realtime_rows(results: dict) -> list[str]:
         def cell(v, unit: str = "") -> str:
             return "–" if v is None else (str(v) if isinstance(v, int) else _fmt(v, unit))
         why = "; ".join(x["invalid_reasons"]) or "–"
-        lines.append(f"| {name} | {x['valid_runs']} of {x['runs']} | {why} | {cell(x['sim_late_torques'])} "
+        rtf = [r["real_time_factor"] for r in get(results, f"realtime.{name}.runs") or [] if not _invalid(r)]
+        lowest = min(rtf) if rtf else None
+        lines.append(f"| {name} | {x['valid_runs']} of {x['runs']} | {why} | {cell(lowest)} "
+                     f"| {cell(x['sim_late_torques'])} "
                      f"| {cell(x['latency_p99_ms_worst'])} | {cell(x['cpg_overruns'])} "
                      f"| {cell(x['cpg_work_p99_ms_worst'])} |")
     return lines
@@ -207,8 +210,9 @@ def table(results: dict) -> list[str]:
                   "scenario; a run is valid when the robot did "
                   "not fall, cpg_node and pid_node ticked and the robot moved; the other columns are over "
                   "the valid runs):", "",
-                  "| scenario | valid runs | invalid (why) | sim late torques | latency p99 ms (worst) "
-                  "| cpg_node overruns | cpg work p99 ms (worst) |", "|---|---|---|---|---|---|---|", *rt]
+                  "| scenario | valid runs | invalid (why) | real-time factor (lowest) | sim late torques "
+                  "| latency p99 ms (worst) | cpg_node overruns | cpg work p99 ms (worst) |",
+                  "|---|---|---|---|---|---|---|---|", *rt]
     osc = _oscillator_rows(results)
     if osc:
         lines += ["", "Cost vs oscillators per DOF (10×N network; µs per RK4 step; learning at dt 10 ms "
