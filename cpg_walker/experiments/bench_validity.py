@@ -11,10 +11,11 @@ import math
 from collections.abc import Mapping
 
 #: The commanded gait (ζ = α = 1) walks ≈ 0.08 m/s (README: 0.083 m/s over 60 s through the graph, the
-#: in-process loop 1.58 m in 20 s). A walk must cover at least 0.05 m, ≈ 0.6 s of that gait: every
-#: benchmark walk lasts 4 s or more of walking (1 s in --quick's robots walks) and covers ≥ 0.15 m even
-#: in its slow opening steps, while a robot that only stood (no targets, no controller) drifts < 1 mm
-#: (0.0003 m in the 2026-12 run's stalled real-time walk).
+#: in-process loop 1.58 m in 20 s). A walk must cover at least 0.05 m, ≈ 0.6 s of that gait: the
+#: benchmark walks that are checked for movement last 3 s or more and cover ≥ 0.17 m even from standing
+#: (run_walk: 0.005 m in 1 s, 0.17 m in 3 s, 0.24 m in 4 s), while a robot that only stood (no targets, no
+#: controller) drifts < 1 mm (0.0003 m in the 2026-12-02 run's stalled real-time walk). The robots
+#: section's 1 s graph runs move only millimetres by design: fall and ticks are checked there, not distance.
 MIN_WALK_DISTANCE_M = 0.05
 
 #: The runs behind the figures the README quotes (dotted paths into bench.json; a list is checked run by
