@@ -59,19 +59,20 @@ def _check_readme(path: str) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from cpg_walker.experiments.bench import headline_status
+
     if args.readme is not None:
         _check_readme(args.readme)
-    if args.from_json:
+    if args.from_json:  # exit 1 if a headline run in it is invalid (the tables written first)
         from pathlib import Path
 
         from cpg_walker.experiments.bench_report import write
 
-        results = read_results(args.from_json)
+        results = read_results(args.from_json)  # write() checks the shape again (ValueError): a bug then
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         write(results, out, args.readme)
-        return 0
+        return headline_status(results)
     from cpg_walker.experiments.bench import run_benchmarks
 
-    run_benchmarks(args.out, only=args.only, quick=args.quick, readme=args.readme)
-    return 0
+    return headline_status(run_benchmarks(args.out, only=args.only, quick=args.quick, readme=args.readme))

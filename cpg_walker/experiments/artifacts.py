@@ -2,8 +2,9 @@
 
 Each ``Artifact`` is one `cpg-walker` command run into ``docs/results/<name>/`` (its ``--out``; the
 benchmarks keep ``docs/bench``); the docs quote figures from those files, and their generated tables
-(``readme_blocks``) are checked against them by the tests. ``wall_min`` is what the run took on the project's 2-core machine, for the progress
-line; the commands themselves record their provenance (command, commit, date, load) where they can.
+(``readme_blocks``) are checked against them by the tests. ``wall_min`` is what the run took on the
+project's 2-core machine, for the progress line; the commands record their provenance (command, commit,
+date, load) where they can.
 """
 
 from __future__ import annotations

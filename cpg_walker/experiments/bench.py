@@ -108,3 +108,17 @@ def run_benchmarks(out_dir: str | Path, only: list[str] | None = None, quick: bo
     print(f"bench: wrote bench.json, bench.md{''.join(', ' + p.name for p in files)} in {out}"
           + (f"; updated {readme}" if readme is not None else ""), file=sys.stderr)
     return results
+
+
+def headline_status(results: dict) -> int:
+    """0 if every headline figure's runs are valid (bench_validity.HEADLINE), else 1, after printing why
+    to stderr; the last line says which headline run is invalid and why."""
+    from cpg_walker.experiments.bench_validity import headline_problems
+
+    problems = headline_problems(results)
+    if not problems:
+        return 0
+    for line in problems[1:]:
+        print(f"bench: headline run invalid: {line}", file=sys.stderr)
+    print(f"cpg-walker bench: headline run invalid ({len(problems)} in all): {problems[0]}", file=sys.stderr)
+    return 1

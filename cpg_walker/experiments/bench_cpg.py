@@ -111,10 +111,16 @@ def case(shape: tuple[int, int], w_base: float, dt_learn: float, span: float, qu
     return out_case
 
 
+def _checked(entry: dict) -> dict:
+    from cpg_walker.experiments.bench_validity import check_run, numbers
+
+    return {**check_run(figures=numbers(entry)), **entry}
+
+
 def run(quick: bool = False) -> dict:
     return {
-        "fig2_1x4": case((1, 4), 15.0, 0.004, 4.0 if quick else 20.0, quick),
-        "humanoid_10x3": case((10, 3), 2.5, 0.01, 10.0 if quick else 60.0, quick),
+        "fig2_1x4": _checked(case((1, 4), 15.0, 0.004, 4.0 if quick else 20.0, quick)),
+        "humanoid_10x3": _checked(case((10, 3), 2.5, 0.01, 10.0 if quick else 60.0, quick)),
         "integrator": "fixed-step RK4, backends: numpy (in-place buffers) and numba (compiled whole-step "
         "kernels, cpg/kernels.py); baseline solve_ivp RK45 rtol=1e-6 atol=1e-9",
         "backends": list(BACKENDS),

@@ -63,7 +63,28 @@ def graph_run(pacing: str, duration: float, target: str | None = None, control_p
     }
     if target == "cpg_node":
         out["cpg_tick"] = node_stats["cpg_node"].get("tick", {})
+    out.update(check_graph_run(out, node_stats, rec.fall_time_s, walking=target is not None))
     return out
+
+
+def controller_ticks(node_stats: dict) -> dict[str, int | None]:
+    """The ticks each controller node handled, from its exit stats (None: it logged none): cpg_node's
+    loop ticks (runtime.TickStats), the other nodes' handled messages (runtime.ActivityStats)."""
+    ticks: dict[str, int | None] = {}
+    for name, stats in node_stats.items():
+        if name == "cpg_node":
+            ticks[name] = stats.get("tick", {}).get("ticks") if stats else None
+        else:
+            ticks[name] = stats.get("messages") if stats else None
+    return ticks
+
+
+def check_graph_run(run: dict, node_stats: dict, fall_time_s: float | None, walking: bool) -> dict:
+    """bench_validity.check_run of one graph run (``walking``: it has a target node, so it must move)."""
+    from cpg_walker.experiments.bench_validity import check_run
+
+    return check_run(fell=run["fell"], fall_time_s=fall_time_s, ticks=controller_ticks(node_stats),
+                     distance_m=run["distance_m"], walking=walking)
 
 
 def inprocess_baseline(duration: float) -> dict:
@@ -284,6 +305,13 @@ def third_process_rates(window: float = 2.0, start_timeout: float = 120.0) -> di
             "states_answered_fraction": round(len(states & torques) / len(states), 4) if states else None}
 
 
+def checked(entry: dict) -> dict:
+    """A measurement entry with its validity (bench_validity: every figure present and finite)."""
+    from cpg_walker.experiments.bench_validity import check_run, numbers
+
+    return {**check_run(figures=numbers(entry)), **entry}
+
+
 def run(quick: bool = False) -> dict:
     d = 3.0 if quick else 10.0
     d_cpg = 10.0 if quick else 20.0
@@ -295,9 +323,10 @@ def run(quick: bool = False) -> dict:
         "setup": {"physics_dt_s": Hoap2Sim().dt, "control_period_s": control_period(), "sim_s_per_run": d,
                   "sim_s_per_cpg_run": d_cpg,
                   "note": "sim_node + pid_node standing unless stated; each run in its own DDS domain"},
-        "baseline_inprocess": inprocess_baseline(d),
-        "per_period_costs": per_period_costs(300 if quick else 1000),
-        "pingpong_baseline": {mode: pingpong_latency(mode, 300 if quick else 1000) for mode in PING_MODES},
+        "baseline_inprocess": checked(inprocess_baseline(d)),
+        "per_period_costs": checked(per_period_costs(300 if quick else 1000)),
+        "pingpong_baseline": {mode: checked(pingpong_latency(mode, 300 if quick else 1000))
+                              for mode in PING_MODES},
     }
     for pacing in PACINGS:
         result[pacing] = graph_run(pacing, d, work=work)
@@ -307,15 +336,21 @@ def run(quick: bool = False) -> dict:
     # cpg_node's loop at its rate: the CPG takes over at 6.6 s (recorded opening steps before)
     result["realtime_cpg_walk"] = graph_run("realtime", d_cpg, "cpg_node", work=work)
     result["lockstep_cpg_walk"] = graph_run("lockstep", d_cpg, "cpg_node", work=work)
-    result["realtime_rates_at_third_process"] = third_process_rates()
-    lockstep_tick, rates = result["lockstep_cpg_walk"]["cpg_tick"], result["realtime_rates_at_third_process"]
+    result["realtime_rates_at_third_process"] = checked(third_process_rates())
+    rates = result["realtime_rates_at_third_process"]
+
+    def valid(key: str) -> dict:  # an invalid run gives no summary figure (None)
+        return result[key] if result[key]["valid"] else {}
+
+    lockstep_tick, realtime_tick = (valid(k).get("cpg_tick", {}) for k in ("lockstep_cpg_walk",
+                                                                         "realtime_cpg_walk"))
     result["summary"] = {
-        "real_time_factor": {k: result[k]["real_time_factor"] for k in
+        "real_time_factor": {k: valid(k).get("real_time_factor") for k in
                              ("realtime", "fast", "lockstep", "lockstep_walk_3_nodes", "lockstep_1khz")},
-        "latency_p50_ms": result["lockstep"]["latency_ms"].get("p50_ms"),
-        "latency_p99_ms": result["lockstep"]["latency_ms"].get("p99_ms"),
-        "cpg_node_realtime_jitter_ms": result["realtime_cpg_walk"]["cpg_tick"].get("jitter_ms"),
-        "cpg_node_realtime_work_ms": result["realtime_cpg_walk"]["cpg_tick"].get("work_ms"),
+        "latency_p50_ms": valid("lockstep").get("latency_ms", {}).get("p50_ms"),
+        "latency_p99_ms": valid("lockstep").get("latency_ms", {}).get("p99_ms"),
+        "cpg_node_realtime_jitter_ms": realtime_tick.get("jitter_ms"),
+        "cpg_node_realtime_work_ms": realtime_tick.get("work_ms"),
         # the longest tick (numba compiling at the CPG hand-over once took ~1 s; the node warms up now)
         "cpg_node_lockstep_work_ms_max": lockstep_tick.get("work_ms", {}).get("max"),
         "joint_states_hz_at_third_process": rates["joint_states_hz"],

@@ -64,7 +64,9 @@ def run(quick: bool = False) -> dict:
         "learning_step_us": rep.wall_time_s / steps * 1e6,
         "teaching_seconds_per_wall_second": rep.learn_time_s / rep.wall_time_s,
     }
-    return out
+    from cpg_walker.experiments.bench_validity import check_run, numbers
+
+    return {k: {**check_run(figures=numbers(v)), **v} for k, v in out.items()}
 
 
 if __name__ == "__main__":

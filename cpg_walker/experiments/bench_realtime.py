@@ -27,7 +27,7 @@ import threading
 import time
 from pathlib import Path
 
-from cpg_walker.experiments.bench_graph import _node_stats
+from cpg_walker.experiments.bench_graph import _node_stats, check_graph_run, checked
 
 #: (name, attached subscribers, CPU-bound process) of the full run; ``--quick`` runs QUICK_SCENARIOS.
 SCENARIOS = [("alone", 0, False), ("subscribers_1", 1, False), ("subscribers_3", 3, False),
@@ -126,9 +126,11 @@ def scenario_run(subscribers: int, cpu_load: bool, duration: float, work: Path, 
             m = re.findall(r"received (\{.*\})", out.read_text(errors="replace"))
             received = json.loads(m[-1]) if m else {}
     sched = {n: _scheduling_line(run.logs[n]) for n in ("sim_node", "pid_node", "cpg_node")}
+    distance = round(float(rec.base_xy[-1][0] - rec.base_xy[0][0]), 3) if rec.base_xy else None
     return {
-        "fell": bool(rec.fell), "fall_time_s": rec.fall_time_s,
-        "distance_m": round(float(rec.base_xy[-1][0] - rec.base_xy[0][0]), 3) if rec.base_xy else None,
+        **check_graph_run({"fell": bool(rec.fell), "distance_m": distance},
+                          {"pid_node": pid, "cpg_node": cpg}, rec.fall_time_s, walking=True),
+        "fell": bool(rec.fell), "fall_time_s": rec.fall_time_s, "distance_m": distance,
         "sim_s": s["sim_s"], "real_time_factor": s["real_time_factor"],
         "cpg_overruns": cpg.get("overruns"),
         "cpg_work_ms": {k: tick.get("work_ms", {}).get(k) for k in ("p50", "p99", "max")},
@@ -156,8 +158,12 @@ def _scheduling_line(log: str) -> str | None:
     return m[-1].strip() if m else None
 
 
-def summarize_runs(runs: list[dict]) -> dict:
-    """Over a scenario's runs: falls, counts summed, latency/work percentiles as the worst run's."""
+def summarize_runs(all_runs: list[dict]) -> dict:
+    """Over a scenario's runs: how many, how many valid (bench_validity: no fall, controller ticks, moved)
+    and why the others are not, falls; over the valid runs only: counts summed, latency/work percentiles
+    as the worst run's (None without a valid run)."""
+    runs = [r for r in all_runs if r["valid"]]
+
     def worst(path: tuple[str, str]):
         vals = [r[path[0]][path[1]] for r in runs if r[path[0]].get(path[1]) is not None]
         return max(vals) if vals else None
@@ -167,7 +173,9 @@ def summarize_runs(runs: list[dict]) -> dict:
         return sum(vals) if vals else None
 
     return {
-        "runs": len(runs), "falls": sum(r["fell"] for r in runs),
+        "runs": len(all_runs), "valid_runs": len(runs),
+        "invalid_reasons": [r["invalid_reason"] for r in all_runs if not r["valid"]],
+        "falls": sum(r["fell"] for r in all_runs),
         "sim_s_total": round(sum(r["sim_s"] for r in runs), 3),
         "cpg_overruns": total("cpg_overruns"), "pid_stale_events": total("pid_stale_events"),
         "sim_late_torques": total("sim_late_torques"),
@@ -259,7 +267,7 @@ def run(quick: bool = False) -> dict:
         "setup": {"pacing": "realtime", "sim_s_per_run": duration, "runs_per_scenario": repeats,
                   "walk": "cpg_node (CPG takes over at 6.6 s)", "attach_after_cpg_ready_s": ATTACH_AFTER_S,
                   "scenarios": {n: {"subscribers": k, "cpu_load": c} for n, k, c in SCENARIOS if n in names}},
-        "per_period_cpu": per_period_cpu(200 if quick else 500),
+        "per_period_cpu": checked(per_period_cpu(200 if quick else 500)),
     }
     for name, subs, load in SCENARIOS:
         if name not in names:

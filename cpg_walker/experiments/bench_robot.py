@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 
+from cpg_walker.experiments.bench_validity import check_run
 from cpg_walker.robot.gait_data import GaitPlayback, load_gait
 from cpg_walker.robot.hoap2 import Hoap2Sim
 from cpg_walker.robot.pid import PidLaw
@@ -47,19 +48,25 @@ def run(quick: bool = False) -> dict:
     step_us = statistics.median(p[0] for p in pairs)
     mj_us = statistics.median(p[1] for p in pairs)
     duration = 5.0 if quick else 30.0
-    rtf = []
+    runs = []
     for _ in range(1 if quick else 3):
         sim.reset()
         source = GaitPlayback(load_gait("walk"))
         pid = PidLaw.from_config()
         started = time.perf_counter()
         result = run_replay(sim, source, pid, duration)
-        rtf.append(result.duration_s / (time.perf_counter() - started))
+        rtf = result.duration_s / (time.perf_counter() - started)
+        fell, distance = bool(result.fell), result.metrics.get("distance_m")
+        runs.append({**check_run(fell=fell, fall_time_s=result.fall_time_s,
+                                 distance_m=distance, walking=True, figures={"real_time_factor": rtf}),
+                     "real_time_factor": round(rtf, 2), "fell": fell, "distance_m": distance})
+    valid = [r["real_time_factor"] for r in runs if r["valid"]]  # invalid replays give no figure
     return {
         "physics_timestep_s": sim.dt,
         "physics_step_us": round(step_us, 2),
         "bare_mj_step_us": round(mj_us, 2),
         "replay_sim_s": duration,
-        "replay_real_time_factor": round(statistics.median(rtf), 1),
-        "replay_fell": bool(result.fell),
+        "replay_real_time_factor": round(statistics.median(valid), 1) if valid else None,
+        "replay_fell": any(r["fell"] for r in runs),
+        "replay_runs": runs,
     }

@@ -30,6 +30,7 @@ import numpy as np
 
 from cpg_walker.experiments.bench import median_us
 from cpg_walker.experiments.bench_cpg import BACKENDS, case
+from cpg_walker.experiments.bench_validity import check_run, combine, numbers
 
 #: Oscillators per DOF of the ``oscillators`` section (quick: a subset).
 OSCILLATORS = tuple(range(1, 13))
@@ -51,7 +52,8 @@ def run_oscillators(quick: bool = False) -> dict:
     out: dict = {}
     for n in OSCILLATORS_QUICK if quick else OSCILLATORS:
         _progress(f"oscillators: 10x{n}")
-        out[str(n)] = case((10, n), 2.5, 0.01, span, quick, reps_n)
+        entry = case((10, n), 2.5, 0.01, span, quick, reps_n)
+        out[str(n)] = {**check_run(figures=numbers(entry)), **entry}
     return {"per_dof": out, "network": "10 CPGs x N oscillators (uncoupled CPGs, eq 8 inside each), "
             "teaching 3 harmonics of 2.5 rad/s; learning dt 10 ms, playback 1 kHz",
             "step_cost": f"median of {reps_n[0]} x {reps_n[1]} steps", "learning_span_s": span,
@@ -123,25 +125,37 @@ def _walks(counts: tuple[int, ...], duration: float) -> dict:
     jobs = os.cpu_count() or 1
     spec = _walk_spec(duration)
     run_walk(spec)  # warm-up: controller, gait data and kernels loaded, as in the pool's workers later
-    serial, errors = [], []
+    serial, errors, serial_runs = [], [], []
     for k in range(max(counts)):
         _progress(f"robots: in-process walk {k + 1}/{max(counts)} serially")
         t0 = time.perf_counter()
-        errors += [r["error"] for r in run_many(run_walk, [spec], jobs=1) if "error" in r]
+        done = run_many(run_walk, [spec], jobs=1)
         serial.append(time.perf_counter() - t0)
+        errors += [r["error"] for r in done if "error" in r]
+        serial_runs += [_walk_record(r) for r in done]
     out: dict = {}
     for R in counts:
         _progress(f"robots: {R} in-process walks in {min(jobs, R)} processes")
         t0 = time.perf_counter()
-        errors += [r["error"] for r in run_many(run_walk, [spec] * R, jobs=jobs) if "error" in r]
+        done = run_many(run_walk, [spec] * R, jobs=jobs)
         parallel_s = time.perf_counter() - t0
+        errors += [r["error"] for r in done if "error" in r]
         serial_s = sum(serial[:R])
-        out[str(R)] = {"serial_wall_s": serial_s, "parallel_wall_s": parallel_s,
+        runs = {"serial": serial_runs[:R], "parallel": [_walk_record(r) for r in done]}
+        out[str(R)] = {**combine(runs["serial"] + runs["parallel"]), "runs": runs,
+                       "serial_wall_s": serial_s, "parallel_wall_s": parallel_s,
                        "speedup": serial_s / parallel_s, "processes": min(jobs, R) if R > 1 else 0,
                        "sim_s_per_wall_s_serial": R * duration / serial_s,
                        "sim_s_per_wall_s_parallel": R * duration / parallel_s}
     out["errors"] = errors[:3]
     return out
+
+
+def _walk_record(m: dict) -> dict:
+    """One in-process walk of the section (walk_runs.run_walk's metrics) with its validity."""
+    return {**check_run(fell=m.get("fell"), fall_time_s=m.get("fall_time_s"), distance_m=m.get("distance_m"),
+                        walking=True, error=m.get("error")),
+            **{k: m.get(k) for k in ("fell", "fall_time_s", "distance_m")}}
 
 
 def _distinct_domains(R: int) -> list[int]:
@@ -161,20 +175,30 @@ def _distinct_domains(R: int) -> list[int]:
 def _graphs(counts: tuple[int, ...], parallel_counts: tuple[int, ...], duration: float, work: Path) -> dict:
     """Lockstep CPG-walk graphs, each in its own domain: R = max(counts) run one after the other (each
     timed: the serial wall for R is that of the first R), then R at once for each R in ``parallel_counts``."""
+    from cpg_walker.experiments.bench_graph import _node_stats, controller_ticks
     from cpg_walker.experiments.replay_graph import run_graph
 
     errors: list[str] = []
 
-    def one(k: int, domain: int, mode: str) -> tuple[float, float]:
+    def one(k: int, domain: int, mode: str) -> tuple[float, float, dict]:
         t0 = time.perf_counter()
         try:
             run = run_graph(work, "cpg_node", duration=duration, pacing="lockstep",
                             timeout=120 + 30 * duration, tag=f"{mode}_{k}", domain_id=domain)
             rtf = float(run.record.stats["real_time_factor"])
+            rec = run.record
+            stats = {n: _node_stats(log) for n, log in run.logs.items() if n != "sim_node"}
+            distance = round(float(rec.base_xy[-1][0] - rec.base_xy[0][0]), 4) if rec.base_xy else None
+            # walking=False: these runs are 1 sim s of the recorded opening steps, which move the base
+            # only millimetres; they time start-up and throughput, so fall and ticks are what must hold
+            record = {**check_run(fell=bool(rec.fell), fall_time_s=rec.fall_time_s,
+                                  ticks=controller_ticks(stats)),
+                      "fell": bool(rec.fell), "distance_m": distance, "real_time_factor": rtf}
         except Exception as exc:  # a failed run is reported (its wall time still counts), not fatal
             errors.append(f"{mode}_{k}: {type(exc).__name__}: {str(exc)[:200]}")
             rtf = float("nan")
-        return time.perf_counter() - t0, rtf
+            record = check_run(error=errors[-1])
+        return time.perf_counter() - t0, rtf, record
 
     domains = _distinct_domains(max(counts))
     serial = []
@@ -188,11 +212,13 @@ def _graphs(counts: tuple[int, ...], parallel_counts: tuple[int, ...], duration:
         with ThreadPoolExecutor(R) as pool:  # the nodes are processes; threads only wait for them
             runs = list(pool.map(one, range(R), domains[:R], [f"parallel{R}"] * R))
         parallel_s = time.perf_counter() - t0
-        serial_s = sum(w for w, _ in serial[:R])
-        out[str(R)] = {"serial_wall_s": serial_s, "parallel_wall_s": parallel_s,
+        serial_s = sum(w for w, _, _ in serial[:R])
+        records = {"serial": [r for _, _, r in serial[:R]], "parallel": [r for _, _, r in runs]}
+        out[str(R)] = {**combine(records["serial"] + records["parallel"]), "runs": records,
+                       "serial_wall_s": serial_s, "parallel_wall_s": parallel_s,
                        "speedup": serial_s / parallel_s,
-                       "sim_rtf_serial_median": float(np.median([r for _, r in serial[:R]])),
-                       "sim_rtf_parallel_median": float(np.median([r for _, r in runs]))}
+                       "sim_rtf_serial_median": float(np.median([r for _, r, _ in serial[:R]])),
+                       "sim_rtf_parallel_median": float(np.median([r for _, r, _ in runs]))}
     out["errors"] = errors
     return out
 
@@ -200,7 +226,7 @@ def _graphs(counts: tuple[int, ...], parallel_counts: tuple[int, ...], duration:
 def run_robots(quick: bool = False) -> dict:
     """R robots at once: vectorised CPGs, in-process walks in processes, ROS graphs in domains."""
     counts = ROBOTS_QUICK if quick else ROBOTS
-    walk_s, graph_s = (1.0, 1.0) if quick else (4.0, 1.0)
+    walk_s, graph_s = (3.0, 1.0) if quick else (4.0, 1.0)  # from standing: 1 s moves 5 mm, 3 s 0.17 m
     work = Path(tempfile.mkdtemp(prefix="bench_robots_"))
     out: dict = {"setup": {"robots": list(counts), "graph_robots": list(counts if quick else GRAPH_ROBOTS),
                            "walk_sim_s": walk_s, "graph_sim_s": graph_s,
@@ -212,7 +238,8 @@ def run_robots(quick: bool = False) -> dict:
                  "vectorised_cpg": {}}
     for R in counts:
         _progress(f"robots: R={R} vectorised CPG")
-        out["vectorised_cpg"][str(R)] = _vectorised(R, quick)
+        entry = _vectorised(R, quick)
+        out["vectorised_cpg"][str(R)] = {**check_run(figures=numbers(entry)), **entry}
     out["inprocess_walks"] = _walks(counts, walk_s)
     graphs = counts if quick else GRAPH_ROBOTS
     out["ros_graphs"] = _graphs(graphs, graphs[-1:] if quick else graphs, graph_s, work)
