@@ -5,8 +5,6 @@ ticks or did not move is invalid, kept in bench.json with its reason, left out o
 import copy
 import json
 
-import pytest
-
 from cpg_walker.cli.main import main
 from cpg_walker.experiments.bench_graph import check_graph_run
 from cpg_walker.experiments.bench_validity import (
@@ -145,16 +143,3 @@ def test_from_json_with_valid_headline_runs_exits_0(tmp_path):
     table = (tmp_path / "out" / "bench_table.md").read_text()
     assert "ROS graph sim + PID, lockstep, × real time | 0.61×" in table
     assert "ROS graph 3-node CPG walk, lockstep, × real time | 0.32×" in table
-
-
-@pytest.mark.parametrize("content, says", [
-    ("[1, 2]", "not a list"), ("{}", "no benchmark section"), ("not json", "not JSON"),
-    (None, "No such file"),
-])
-def test_from_json_bad_input_is_one_line_exit_2(tmp_path, capsys, content, says):
-    src = tmp_path / "bench.json"
-    if content is not None:
-        src.write_text(content)
-    assert main(["bench", "--out", str(tmp_path / "out"), "--from-json", str(src)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("cpg-walker bench: error: ") and says in err[0]
