@@ -156,12 +156,13 @@ def test_short_demo_writes_everything_and_leaves_nothing(tmp_path, ros_domain):
     assert summary["fell"] is False and walk["fell"] is False
     # each segment's speed: the first (from t = 0, the recorded opening steps in it) walks forward; the
     # others that last long enough within the margin of the same schedule walked in-process (the
-    # committed docs/results/headline.json, test_headline.py)
+    # committed docs/results/headline/headline.json, test_headline.py)
     from pathlib import Path
 
     from cpg_walker.experiments.headline import RESULTS_NAME, speed_bound
 
-    artifact = Path(__file__).resolve().parents[1] / "docs" / "results" / f"{RESULTS_NAME}.json"
+    results = Path(__file__).resolve().parents[1] / "docs" / "results"
+    artifact = results / RESULTS_NAME / f"{RESULTS_NAME}.json"
     inproc = {s["label"]: s for r in json.loads(artifact.read_text())["runs"] if r["name"] == "demo_schedule"
               for s in r["segments"]}
     assert segs[0]["speed_mps"] > 0.5 * inproc[segs[0]["label"]]["speed_mps"], segs[0]

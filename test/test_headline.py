@@ -2,8 +2,8 @@
 for 60 s, zeta 1.5 and -1.2 from standing and changed at run time, a reversal, alpha 0 -> 1, the demo's
 schedule; in-process, the default feedback pathways) is walked again and must not fall, and its speed,
 heading change, lateral drift and segment speeds must stay within ``MARGINS`` of the committed artifact
-(docs/results/headline.json, written by ``cpg-walker results``); the README's results table must be that
-artifact's."""
+(docs/results/headline/headline.json, written by ``cpg-walker results``); the README's results table must
+be that artifact's."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from cpg_walker.experiments.readme_blocks import read_block
 pytestmark = pytest.mark.slow
 
 REPO = Path(__file__).resolve().parents[1]
-ARTIFACT = REPO / "docs" / "results" / "headline.json"
+ARTIFACT = REPO / "docs" / "results" / "headline" / "headline.json"
 README = REPO / "README.md"
 
 
