@@ -1,4 +1,5 @@
-"""The humanoid CPG controller (cpg/humanoid.py): learning, Fig 6 accuracy, YAML I/O, modulation, walking."""
+"""The humanoid CPG controller (walker/controller.py): learning, Fig 6 accuracy, YAML I/O, modulation,
+walking."""
 
 import copy
 import math

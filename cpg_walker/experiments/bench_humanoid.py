@@ -1,4 +1,4 @@
-"""Benchmark of the humanoid CPG (cpg/humanoid.py): µs per controller step, learning wall time.
+"""Benchmark of the humanoid CPG (walker/controller.py): µs per controller step, learning wall time.
 
 * step: one `HumanoidCPG.step(0.002)` + `joint_targets()` (RK4 of the frozen 10×N network, the ζ/α
   filter idle), the node's per-tick cost at 500 Hz; for N = 3 (default) and N = 10.

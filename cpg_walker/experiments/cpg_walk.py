@@ -1,7 +1,7 @@
 """In-process CPG walk (no ROS): the learned humanoid CPG drives the PID servos of the simulated HOAP-2.
 
 Same loop as the recorded replay (experiments/replay.py: PID torque law at 500 Hz on 2 ms old state);
-the target source is `cpg.humanoid.CPGGaitSource` (start-up transition, then the frozen CPG, optional
+the target source is `walker.gait_source.CPGGaitSource` (start-up transition, then the frozen CPG, optional
 ζ/α schedule). `cpg-walker cpg-walk` writes DIR/walk.json (replay.json's keys + zeta, alpha, feedback,
 n_oscillators, transition, the CPG file) and a side-camera filmstrip.
 """

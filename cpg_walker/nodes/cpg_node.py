@@ -1,6 +1,6 @@
 """cpg_node: the learned humanoid CPG as a ROS node (``ros2 run cpg_walker cpg_node``).
 
-Thin wiring around ``cpg.humanoid.CPGGaitSource``: on every ``/clock`` tick it advances the CPG to the
+Thin wiring around ``walker.gait_source.CPGGaitSource``: on every ``/clock`` tick it advances the CPG to the
 tick's sim time and publishes ``/joint_targets`` stamped with it, and (``lookahead``) also the next
 period's target, exactly like target_player_node, so lockstep runs stay deterministic. ``zeta``/``alpha``
 are the oscillators' modulation commands (HumanoidCPG's smoothed ζ/α), never a scaling of the output.
