@@ -95,9 +95,10 @@ def test_the_walk_survives_the_degraded_link(walk):
 
 
 #: The realtime relayed walk: sim s (the CPG drives alone from the hand-over's end, 6.6 s: 7.4 s of it);
-#: loss; delay and jitter (wall s). `cpg-walker transport` (docs/transport.md, 30 s walks, load 7-16) walked
-#: 20 % loss and 2 ms delay at zeta 1 with feedback and fell at 3 ms; here half that delay, a quarter of
-#: that loss: the test is that the link's delay reaches the physics (realtime) past the hand-over.
+#: loss; delay and jitter (wall s). `cpg-walker transport` (docs/results/transport/transport.md, 30 s
+#: walks, load 7-16) walked 20 % loss and 2 ms delay at zeta 1 with feedback and fell at 3 ms; here half
+#: that delay, a quarter of that loss: the test is that the link's delay reaches the physics (realtime)
+#: past the hand-over.
 RT_DURATION_S, RT_LOSS, RT_DELAY_S, RT_JITTER_S = 14.0, 0.05, 0.001, 0.0005
 #: m the realtime relayed walk goes at least from the hand-over's end (6.6 s) to 14 s: 7.4 s at the
 #: in-process 0.083 m/s would be 0.61 m; half of it, so a walk that stalls or shuffles in place fails

@@ -4,7 +4,8 @@ Each namespace has only lo and its veth end, so every message between the robot 
 crosses the link; discovery: the SUBNET range plus the other side's address as ROS_STATIC_PEERS
 (experiments/two_hosts.py). The walk is lockstep: other load on the machine slows it, never changes it.
 
-The local-vs-link latency comparison is ``cpg-walker two-hosts`` (docs/two_hosts.json, checked here)."""
+The local-vs-link latency comparison is ``cpg-walker two-hosts``
+(docs/results/two_hosts/two_hosts.json, checked here)."""
 
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ CONTROL_PERIOD_S = float(ros_parameters("sim.yaml", "sim")["control_period"])
 #: Bytes a period's /joint_torques at least takes on the wire (RTPS + a JointState with every joint's
 #: name and effort: several hundred in fact); the bytes to the sim must cover one per period.
 TORQUE_BYTES_MIN = 100
-RESULT = Path(__file__).resolve().parent.parent / "docs" / "two_hosts.json"
+RESULT = Path(__file__).resolve().parent.parent / "docs" / "results" / "two_hosts" / "two_hosts.json"
 
 
 def _namespaces() -> set[str]:
@@ -90,8 +91,8 @@ def test_veth_pair_is_always_removed():
 
 
 def test_committed_comparison():
-    """docs/two_hosts.json (written by ``cpg-walker two-hosts``) holds the round trip of both walks,
-    finite, and neither fell."""
+    """docs/results/two_hosts/two_hosts.json (written by ``cpg-walker two-hosts``) holds the round trip of
+    both walks, finite, and neither fell."""
     result = json.loads(RESULT.read_text())
     assert set(result["state_to_torque_ms"]) == {"local", "two_hosts"}
     for name, run in result["runs"].items():

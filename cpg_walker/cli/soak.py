@@ -1,6 +1,7 @@
 """`cpg-walker soak --out DIR`: the graph walks minutes of sim time (realtime pacing) with a zeta/alpha
 or /cmd_vel change every 20 s; fell or not, each node's memory, late commands and overruns over time;
-DIR/soak.json and DIR/soak.md (experiments/soak.py). The last result is committed as docs/soak.json."""
+DIR/soak.json and DIR/soak.md (experiments/soak.py). The last result is committed as
+docs/results/soak/soak.json."""
 
 from __future__ import annotations
 
