@@ -256,7 +256,8 @@ def test_heading_anti_windup_and_hold():
 def test_a_twist_drives_the_in_process_robot_and_the_timeout_stops_it():
     """The follower as cpg_node applies it, on the simulated robot (experiments/cmd_vel.py run_drive):
     0.06 m/s with a 0.1 rad/s left turn from 10 s; the speed over 14.8-22 s is the command within 10 %,
-    the robot turns left, and after the last Twist (22 s) the timeout stops it: the base moves < 1 cm/s
+    the robot turns left at the rate measured (0.069 rad/s: the heading pathway reaches 69 % of it), and
+    after the last Twist (22 s) the timeout stops it: the base moves < 1 cm/s
     within the packaged timeout + the α fall (1 / alpha_fall_rate) + 2 s (the α filter) and stays
     upright."""
     from cpg_walker.experiments.cmd_vel import Drive, run_drive
@@ -265,7 +266,9 @@ def test_a_twist_drives_the_in_process_robot_and_the_timeout_stops_it():
     assert not m["fell"], m
     (seg,) = m["segments"]
     assert seg["speed_mps"] == pytest.approx(0.06, rel=0.1), seg
-    assert seg["turn_rate_rad_s"] > 0.02, seg
+    # 0.0688 rad/s measured for the 0.1 commanded (the heading pathway, in-process: deterministic), within
+    # the headline walks' 10 % (experiments/headline.py MARGINS)
+    assert seg["turn_rate_rad_s"] == pytest.approx(0.0688, rel=0.1), seg
     stop = m["speed_below_1cm_s_after_s"]
     lim = CmdVelLimits.load()
     assert stop is not None and lim.timeout < stop <= lim.timeout + 1.0 / lim.alpha_fall_rate + 2.0, m

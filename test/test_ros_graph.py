@@ -122,9 +122,15 @@ def test_topics_types_rates_services_and_fall_status(graph, probe):
     _assert_every_period(clock, CONTROL_NS, "/clock")
     # torques answer states: stamped with the stamps of the states (on the 2 ms grid, every period); over
     # the whole run (a probe that falls behind a fast sim reads each topic's backlog from another point)
-    states, torques = ({*earlier[t], *(stamp_ns(m) for _, m in got[t])}
-                       for t in ("/joint_states", "/joint_torques"))
-    assert all(t % CONTROL_NS == 0 for t in torques) and states & torques
+    def seen(topic: str) -> set[int]:
+        return {*earlier[topic], *(stamp_ns(m) for _, m in got[topic])}
+
+    # the two backlogs may not overlap yet (CI once: every torque seen was newer than every state seen):
+    # spin on until they do, the sim going on
+    probe.wait(lambda: seen("/joint_states") & seen("/joint_torques"),
+               lambda: f"a torque stamped as a state seen: states up to {max(seen('/joint_states'))}, "
+                       f"torques from {min(seen('/joint_torques'))}")
+    assert all(t % CONTROL_NS == 0 for t in seen("/joint_torques"))
     imu = got["/imu"][-1][1]
     assert imu.header.frame_id == "imu"
     assert imu.linear_acceleration.z == pytest.approx(9.81, abs=1.0)  # standing still, specific force

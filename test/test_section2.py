@@ -37,9 +37,10 @@ def test_fig2_learns_the_four_frequencies_within_1_percent(runs):
 def test_fig2_teaching_rms_and_free_run_error(runs):
     f = runs["fig2"]
     assert f["teaching_rms"] == pytest.approx(np.sqrt((0.8**2 + 1 + 1.4**2 + 0.5**2) / 2), rel=1e-6)
-    # 10 s of free running (F = 0) against the continued teaching signal: < 5 % of the teaching RMS
+    # 10 s of free running (F = 0) against the continued teaching signal: 0.14 % of the teaching RMS
+    # measured (0.0019 of 1.387, README); held to 0.5 %
     assert f["free_run_s"] == 10.0
-    assert f["free_run_rms_error"] < 0.05 * f["teaching_rms"]
+    assert f["free_run_rms_error"] < 0.005 * f["teaching_rms"]
     c = runs["curves2"]
     assert c["free_t"][-1] - c["free_t"][0] == pytest.approx(10.0, abs=0.01)
 
