@@ -36,6 +36,22 @@ def _faults(tmp_path, ros_domain):
     return FaultGraph(tmp_path, domain_id=ros_domain, say=lambda text: None)
 
 
+def _xfail_if_deaf(g, node: str, heard: str) -> None:
+    """A restarted node's wait ran out: the known limit (docs Faults) is a deaf node - alive, the sim going
+    on, and nothing heard from the graph (``heard``, the line it logs on its first message, not in its
+    log). A node that died, heard the graph, or a sim that stopped is a failure, not this limit."""
+    log = g.graph.procs[node].log()
+    assert g.graph.procs[node].popen.poll() is None, f"the restarted {node} died: {log[-2000:]}"
+    assert heard not in log, f"the restarted {node} heard the graph but did not go on: {log[-2000:]}"
+    g.spin(1.0)  # the odometry queued meanwhile, then: does the sim's time go on?
+    t = g.odom.t
+    g.spin(2.0)
+    assert g.odom.t > t, f"the sim stopped at {t} s: not a deaf {node}"
+    pytest.xfail(f"known limit (docs Faults): {node} restarted after a SIGKILL heard nothing within "
+                 f"{START_S} wall s while the sim went on (a middleware fault, despite hold_ports; checked: "
+                 f"alive, no '{heard}' in its log, /odom advancing)")
+
+
 def test_cpg_and_pid_killed_and_restarted(tmp_path, ros_domain):
     """cpg killed at 9 s: the robot stays up on the pid watchdog (the horizon's gait and stop, then the
     crouch);
@@ -65,15 +81,8 @@ def test_cpg_and_pid_killed_and_restarted(tmp_path, ros_domain):
         try:
             g.graph.wait_for_log("cpg_node", "re-entering the gait from the standing crouch", START_S)
         except TimeoutError:  # Fast DDS: 2 of 12 restarts on the dead node's ports (FaultGraph.hold_ports)
-            log = g.graph.procs["cpg_node"].log()
-            # the known limit is a deaf node: alive, and never a /clock tick. A node that got its first tick
-            # and then never re-entered (a stand-by that does not end), or one that died, is a failure.
-            assert g.graph.procs["cpg_node"].popen.poll() is None, f"the restarted cpg died: {log[-2000:]}"
-            assert "first /clock tick at" not in log, \
-                f"the restarted cpg node got /clock but never re-entered the gait: {log[-2000:]}"
-            pytest.xfail("known limit (docs Faults): the cpg node restarted after a SIGKILL received no "
-                         f"/clock within {START_S} wall s (a middleware fault, despite hold_ports; checked: "
-                         "alive, no tick in its log)")
+            # a node that got its first tick and then never re-entered (a stand-by that does not end) fails
+            _xfail_if_deaf(g, "cpg_node", "first /clock tick at")
         rejoined = float(re.search(r"joined a running sim at ([\d.]+) s",
                                    g.graph.procs["cpg_node"].log()).group(1))
         assert rejoined > t_kill + HOLD_S, rejoined
@@ -92,7 +101,10 @@ def test_cpg_and_pid_killed_and_restarted(tmp_path, ros_domain):
         assert "the servos hold their posture" in g.graph.procs["sim_node"].log()
         fell_in_hold = g.odom.fell_at
         g.restart("pid_node")
-        g.graph.wait_for_log("pid_node", "joined a running sim", START_S)
+        try:
+            g.graph.wait_for_log("pid_node", "joined a running sim", START_S)
+        except TimeoutError:  # seen once with two suites side by side, despite hold_ports
+            _xfail_if_deaf(g, "pid_node", "joined a running sim")
         g.wait(lambda: "torques resumed" in g.graph.procs["sim_node"].log(), START_S, "torques resumed")
         g.graph.wait_for_log("cpg_node", "the servos were released at", START_S)
         back = float(re.search(r"the servos were released at ([\d.]+) s",
