@@ -10,6 +10,7 @@ as a regression rather than a new result (then regenerate the artifact and say s
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -78,7 +79,7 @@ def run_scenario(sc: Scenario) -> dict:
     """Walk ``sc`` in-process; its figures: fell, fall time, steady speed (the window's second half),
     heading change, lateral drift, distance, and each headline segment's speed over its second half."""
     halves = tuple((round(0.5 * (a + b), 3), b) for a, b, _ in sc.segments)
-    spec = WalkSpec(**{**sc.spec.__dict__, "segments": halves}) if halves else sc.spec
+    spec = dataclasses.replace(sc.spec, segments=halves) if halves else sc.spec
     m = run_walk(spec)
     if "error" in m:
         return {"name": sc.name, "error": m["error"]}
