@@ -16,7 +16,7 @@ from cpg_walker.experiments.bench_validity import (
     invalid_runs,
 )
 
-#: cpg_node's exit stats as runtime.TickStats writes them (abridged), and pid_node's (ActivityStats).
+#: cpg_node's exit stats as timing.TickStats writes them (abridged), and pid_node's (ActivityStats).
 CPG_STATS = {"messages": 10000, "tick": {"ticks": 10000, "repeated_clock": 6, "overruns": 360,
                                          "work_ms": {"p50": 0.47, "p99": 3.2, "max": 54.6}}}
 PID_STATS = {"messages": 10001, "active_wall_s": 63.2, "active_cpu_s": 9.3, "cpu_fraction": 0.148}

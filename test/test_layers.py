@@ -1,6 +1,6 @@
 """The package's layers import only downward: every edge between its parts is named here.
 
-Bottom up: ``errors``/``paths``/``progress`` (utilities) → ``cpg`` (the generic CPG) → ``robot`` (the
+Bottom up: ``errors``/``paths``/``progress``/``timing`` (utilities) → ``cpg`` (the generic CPG) → ``robot`` (the
 HOAP-2 model, PID law, contact) → ``walker`` (the HOAP-2 controller: cpg × robot, no ROS) → ``nodes``
 (rclpy nodes and the graph tools) → ``experiments`` → ``cli``. An import not in ALLOWED fails, naming file
 and line.
@@ -21,12 +21,13 @@ ALLOWED: dict[str, set[str]] = {
     "errors": set(),
     "paths": {"errors"},
     "progress": set(),
+    "timing": set(),
     "cpg": set(),
     "robot": {"errors", "paths"},
-    "walker": {"errors", "paths", "cpg", "robot"},
-    "nodes": {"errors", "paths", "cpg", "robot", "walker"},
-    "experiments": {"errors", "paths", "progress", "cpg", "robot", "walker", "nodes"},
-    "cli": {"errors", "paths", "progress", "cpg", "robot", "walker", "nodes", "experiments"},
+    "walker": {"errors", "paths", "timing", "cpg", "robot"},
+    "nodes": {"errors", "paths", "timing", "cpg", "robot", "walker"},
+    "experiments": {"errors", "paths", "progress", "timing", "cpg", "robot", "walker", "nodes"},
+    "cli": {"errors", "paths", "progress", "timing", "cpg", "robot", "walker", "nodes", "experiments"},
     "__init__": set(),
 }
 #: third-party roots a part must not import (the pure layers stay free of ROS).

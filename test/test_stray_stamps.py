@@ -66,7 +66,8 @@ def test_cpg_node_drops_a_stray_clock_jump_and_takes_a_confirmed_one():
     import rclpy
 
     from cpg_walker.nodes.cpg_node import CPGNode
-    from cpg_walker.nodes.runtime import CLOCK_JUMP_NS, StampGuard, params_file
+    from cpg_walker.nodes.runtime import params_file
+    from cpg_walker.timing import CLOCK_JUMP_NS, StampGuard
 
     ctx, node = _in_process(lambda ctx: CPGNode(context=ctx, cli_args=[
         "--ros-args", "--params-file", str(params_file("cpg"))]))
@@ -86,7 +87,7 @@ def test_stamp_guard_confirms_jumps_both_ways():
     """A stamp far ahead or far back is dropped until the next continues from it; a confirmed jump back
     is a restarted sim (RESET), also when the same first state is re-sent (lockstep); small steps back
     (re-sent or stale messages) and normal steps are taken as they are."""
-    from cpg_walker.nodes.runtime import CLOCK_JUMP_NS, CLOCK_RESET_S, StampGuard
+    from cpg_walker.timing import CLOCK_JUMP_NS, CLOCK_RESET_S, StampGuard
 
     g, t = StampGuard(), 50_000_000_000
     assert g.judge(None, 0) == StampGuard.TAKE and g.judge(t, t + 2_000_000) == StampGuard.TAKE

@@ -5,7 +5,7 @@ Measures, each in its own isolated DDS domain with real node processes:
   * the walk through the three-process graph (with target_player_node) in lockstep and real time;
   * the CPG walk (with cpg_node) in real time and lockstep, and cpg_node's loop timing at its rate: wall
     period between consecutive /clock ticks, its jitter against the nominal control period (meaningful in
-    real time), work per tick, overruns (from the node's stats at exit, runtime.TickStats);
+    real time), work per tick, overruns (from the node's stats at exit, timing.TickStats);
   * the stretch goal: lockstep at a 1 ms control period (1 kHz);
   * latency from publishing a /joint_states sample to the sim taking the torque that answers it (p50/p99,
     measured inside the sim process on one monotonic clock);
@@ -69,7 +69,7 @@ def graph_run(pacing: str, duration: float, target: str | None = None, control_p
 
 def controller_ticks(node_stats: dict) -> dict[str, int | None]:
     """The ticks each controller node handled, from its exit stats (None: it logged none): cpg_node's
-    loop ticks (runtime.TickStats), the other nodes' handled messages (runtime.ActivityStats)."""
+    loop ticks (timing.TickStats), the other nodes' handled messages (timing.ActivityStats)."""
     ticks: dict[str, int | None] = {}
     for name, stats in node_stats.items():
         if name == "cpg_node":

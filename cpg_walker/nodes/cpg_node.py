@@ -53,12 +53,8 @@ from cpg_walker.nodes.messages import (
     stamp_ns,
 )
 from cpg_walker.nodes.runtime import (
-    CLOCK_JUMP_NS,
-    ActivityStats,
     HotPath,
-    StampGuard,
     Throttle,
-    TickStats,
     bool_param,
     declare,
     declare_scheduling,
@@ -66,7 +62,6 @@ from cpg_walker.nodes.runtime import (
     float_param,
     gc_summary,
     int_param,
-    latency_summary,
     packaged_parameters,
     parse_cli,
     run_main,
@@ -74,6 +69,7 @@ from cpg_walker.nodes.runtime import (
     strs_param,
 )
 from cpg_walker.nodes.validation import check_finite_scalar, reason_key, to_ns, validate_imu, validate_load
+from cpg_walker.timing import CLOCK_JUMP_NS, ActivityStats, StampGuard, TickStats, latency_summary
 from cpg_walker.walker import feedback as feedback_core
 from cpg_walker.walker.cmd_vel import (
     LIMIT_KEYS,

@@ -21,9 +21,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from cpg_walker.nodes.messages import JointStateBuilder, read_joint_command, read_joint_trajectory, stamp_ns
 from cpg_walker.nodes.runtime import (
-    ActivityStats,
     HotPath,
-    StampGuard,
     Throttle,
     bool_param,
     declare,
@@ -40,6 +38,7 @@ from cpg_walker.robot.hoap2 import default_standing_posture
 from cpg_walker.robot.joints import GROUPS, JOINT_NAMES, MAX_TORQUE_NM
 from cpg_walker.robot.pid import GAINS, LIMITS, PidLaw, gain_owner
 from cpg_walker.robot.trajectory import HORIZON, LIVE, SAFE, GapBridge
+from cpg_walker.timing import ActivityStats, StampGuard
 
 INTERFACE = """\
 subscribes: /joint_targets (sensor_msgs/JointState: position, optional velocity, any subset of joints by

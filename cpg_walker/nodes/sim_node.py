@@ -53,7 +53,6 @@ from cpg_walker.nodes.runtime import (
     float_param,
     floats_param,
     gc_summary,
-    latency_summary,
     parse_cli,
     run_main,
     spin_once_guarded,
@@ -68,6 +67,7 @@ from cpg_walker.robot.pid import ServoHold
 from cpg_walker.robot.pusher import Pusher
 from cpg_walker.robot.run_record import RunRecord
 from cpg_walker.robot.urdf import read_urdf
+from cpg_walker.timing import latency_summary
 
 try:  # tf2_msgs is not on PyPI: a pip-only install has no live /tf (recordings carry /tf, see the docs)
     from tf2_msgs.msg import TFMessage

@@ -15,7 +15,6 @@ from sensor_msgs.msg import JointState
 
 from cpg_walker.nodes.messages import JointStateBuilder
 from cpg_walker.nodes.runtime import (
-    ActivityStats,
     HotPath,
     bool_param,
     declare,
@@ -27,6 +26,7 @@ from cpg_walker.nodes.runtime import (
 )
 from cpg_walker.nodes.validation import to_ns
 from cpg_walker.robot.gait_data import Cycle, GaitPlayback, find_steady_cycle, load_gait
+from cpg_walker.timing import ActivityStats
 
 INTERFACE = """\
 subscribes: /clock (rosgraph_msgs/Clock)
