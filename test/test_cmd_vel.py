@@ -211,6 +211,18 @@ class FakeCPG:
         self.alpha_command = a
 
 
+class FakeSource:
+    """A gait source's command interface (``ctrl``, ``fb``, ``command``) around FakeCPG."""
+
+    def __init__(self, fb):
+        self.ctrl, self.fb = FakeCPG(), fb
+
+    def command(self, z, a):
+        self.ctrl.set_zeta(z)
+        self.ctrl.set_alpha(a)
+        return False
+
+
 def _quat(yaw: float) -> np.ndarray:
     return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
 
@@ -221,19 +233,19 @@ def test_heading_anti_windup_and_hold():
     the reference and u decays to 0 (the robot holds its heading), never turning on."""
     cfg = FeedbackConfig.load()
     fb = FeedbackController(cfg, ("heading",))
-    cpg = FakeCPG()
+    src = FakeSource(fb)
     window = cfg.heading_limit_rad / cfg.heading_gain
     dt = 0.01
     t = 0.0
     fb.observe(t, _quat(0.0), np.zeros(3), (10.0, 10.0))
     fb.capture_heading()
-    apply_output(cpg, fb, CmdVelOutput(1.0, 1.0, 0.5, "following"))
+    apply_output(src, CmdVelOutput(1.0, 1.0, 0.5, "following"))
     for _ in range(1000):  # 10 s at 0.5 rad/s: 5 rad unbounded
         t += dt
         fb.observe(t, _quat(0.0), np.zeros(3), (10.0, 10.0))
     assert fb.heading_ref == pytest.approx(window)
     assert abs(fb.heading_amplitude()) == pytest.approx(cfg.heading_limit_rad, rel=1e-3)  # saturated
-    apply_output(cpg, fb, CmdVelOutput(1.0, 1.0, 0.0, "following"))
+    apply_output(src, CmdVelOutput(1.0, 1.0, 0.0, "following"))
     assert fb.turn_rate == 0.0
     u = []
     for _ in range(800):

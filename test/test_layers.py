@@ -1,9 +1,9 @@
 """The package's layers import only downward: every edge between its parts is named here.
 
-Bottom up: ``errors``/``paths``/``progress``/``timing`` (utilities) → ``cpg`` (the generic CPG) → ``robot`` (the
-HOAP-2 model, PID law, contact) → ``walker`` (the HOAP-2 controller: cpg × robot, no ROS) → ``nodes``
-(rclpy nodes and the graph tools) → ``experiments`` → ``cli``. An import not in ALLOWED fails, naming file
-and line.
+Bottom up: ``errors``/``paths``/``progress``/``timing`` (utilities) → ``cpg`` (the generic CPG) →
+``robot`` (the HOAP-2 model, PID law, contact) → ``walker`` (the HOAP-2 controller: cpg × robot, no
+ROS) → ``nodes`` (rclpy nodes and the graph tools) → ``experiments`` → ``cli``. An import not in ALLOWED
+fails, naming file and line.
 """
 
 from __future__ import annotations

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 from ros_helpers import START_S, SimWatchdog, sim_deadline
 
-from cpg_walker.nodes.cpg_node import FeedbackFade, pathway_list
+from cpg_walker.nodes.cpg_params import pathway_list
 from cpg_walker.nodes.validation import validate_imu, validate_load
+from cpg_walker.walker.cpg_driver import FeedbackFade
 from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig
 
 # ------------------------------------------------------------------------------------------ pure

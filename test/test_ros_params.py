@@ -208,7 +208,7 @@ def test_cpg_node_reports_its_stage_not_a_phase():
     rclpy.init(context=ctx, domain_id=random_domain_id(), signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = CPGNode(context=ctx, cli_args=["--ros-args", "--params-file", str(params_file("cpg"))])
-        assert node.stage == "converged" and not hasattr(node, "phase")
+        assert node.driver.stage == "converged" and not hasattr(node.driver, "phase")
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)

@@ -144,7 +144,7 @@ class DrivenSource:
         if t >= src.active_from:
             out = self.follower.update(t, src.ctrl.zeta, src.ctrl.alpha)
             if out is not None:
-                apply_output(src.ctrl, src.fb, out)
+                apply_output(src, out)
         src.observe(t, quat_wxyz, gyro, loads)
         if t >= self._next_log - 1e-9:
             c = src.ctrl

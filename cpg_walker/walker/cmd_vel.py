@@ -356,13 +356,14 @@ class CmdVelFollower:
         return CmdVelOutput(z, a, w, self.state)
 
 
-def apply_output(ctrl, fb, out: CmdVelOutput) -> None:
-    """Command ``out`` to a HumanoidCPG and a FeedbackController (None: no turning possible), with the
-    heading anti-windup (module docstring)."""
-    if ctrl.zeta_command != out.zeta:
-        ctrl.set_zeta(out.zeta)
-    if ctrl.alpha_command != out.alpha:
-        ctrl.set_alpha(out.alpha)
+def apply_output(source, out: CmdVelOutput) -> None:
+    """Command ``out`` to a gait source (its ``command``: the one entry point of ζ and α) and to its
+    feedback controller ``source.fb`` (None: no turning possible), with the heading anti-windup (module
+    docstring)."""
+    ctrl = source.ctrl
+    if (ctrl.zeta_command, ctrl.alpha_command) != (out.zeta, out.alpha):
+        source.command(out.zeta, out.alpha)
+    fb = getattr(source, "fb", None)
     if fb is None:
         return
     if out.turn_rate != 0.0:

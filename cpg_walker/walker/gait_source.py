@@ -108,6 +108,27 @@ class CPGGaitSource:
         self._t_net = self.handover
         self.feedback_g = None
 
+    @property
+    def t_net(self) -> float:
+        """The sim time the network's state corresponds to."""
+        return self._t_net
+
+    @property
+    def takeover_s(self) -> float:
+        """The sim time from which the CPG alone drives: the end of the start-up (or re-entry) cross-fade."""
+        return self.handover + self.blend
+
+    def command(self, zeta: float, alpha: float) -> bool:
+        """Command ζ and α: the one entry point of a running source (a node's parameters, /cmd_vel's
+        output). Before the CPG has taken over (the network behind ``takeover_s``) the command waits for
+        the end of the cross-fade, replacing any pending one; True when it was deferred so."""
+        if self._t_net < self.takeover_s:
+            self.schedule = [(self.takeover_s, zeta, alpha)]
+            return True
+        self.ctrl.set_zeta(zeta)
+        self.ctrl.set_alpha(alpha)
+        return False
+
     def _advance(self, t: float) -> None:
         while self.schedule and self.schedule[0][0] <= t + 1e-12:
             _, z, a = self.schedule.pop(0)
@@ -161,7 +182,7 @@ class CPGGaitSource:
             q[self._idx] = qc
             qd[self._idx] = qdc
             return q, qd
-        w, dw = _smootherstep(u)
+        w, dw = smootherstep(u)
         dw /= self.blend
         if self.transition == "recording":
             q0, qd0 = self.playback.targets(t)
@@ -177,7 +198,7 @@ class CPGGaitSource:
         return q_out, qd_out
 
 
-def _smootherstep(u: float) -> tuple[float, float]:
+def smootherstep(u: float) -> tuple[float, float]:
     """w(u) = 6u⁵ − 15u⁴ + 10u³ on [0, 1] (C², zero slope and curvature at both ends) and dw/du."""
     u = min(max(u, 0.0), 1.0)
     return _smoother(u), 30 * u * u * (1 - u) ** 2
