@@ -2,8 +2,8 @@
 
 Bottom up: ``errors``/``paths``/``progress`` (utilities) → ``cpg`` (the generic CPG) → ``robot`` (the
 HOAP-2 model, PID law, contact) → ``walker`` (the HOAP-2 controller: cpg × robot, no ROS) → ``nodes``
-(rclpy nodes and the graph tools) → ``experiments`` → ``cli``. An import not in ALLOWED fails, naming file
-and line.
+(the rclpy nodes and what they use) → ``graph`` (the tools that run and inspect the node graph) →
+``experiments`` → ``cli``. An import not in ALLOWED fails, naming file and line.
 """
 
 from __future__ import annotations
@@ -25,8 +25,9 @@ ALLOWED: dict[str, set[str]] = {
     "robot": {"errors", "paths"},
     "walker": {"errors", "paths", "cpg", "robot"},
     "nodes": {"errors", "paths", "cpg", "robot", "walker"},
-    "experiments": {"errors", "paths", "progress", "cpg", "robot", "walker", "nodes"},
-    "cli": {"errors", "paths", "progress", "cpg", "robot", "walker", "nodes", "experiments"},
+    "graph": {"errors", "paths", "cpg", "robot", "walker", "nodes"},
+    "experiments": {"errors", "paths", "progress", "cpg", "robot", "walker", "nodes", "graph"},
+    "cli": {"errors", "paths", "progress", "cpg", "robot", "walker", "nodes", "graph", "experiments"},
     "__init__": set(),
 }
 #: third-party roots a part must not import (the pure layers stay free of ROS).
@@ -88,6 +89,12 @@ def test_the_generic_cpg_imports_nothing_else_of_the_package() -> None:
         others = [m for _, m in _imports(path)
                   if m.split(".")[0] == "cpg_walker" and m.split(".")[1:2] != ["cpg"]]
         assert not others, (path, others)
+
+
+def test_no_node_imports_the_graph_tools() -> None:
+    """The nodes stand on their own: the graph tooling (processes, ros2cli stand-ins) sits above them."""
+    assert "graph" not in ALLOWED["nodes"]
+    assert all("graph" in ALLOWED[part] for part in ("experiments", "cli"))
 
 
 def test_nothing_imports_the_leaves() -> None:

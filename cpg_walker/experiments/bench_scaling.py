@@ -160,7 +160,7 @@ def _walk_record(m: dict) -> dict:
 
 def _distinct_domains(R: int) -> list[int]:
     """R different DDS domains on which no other node is seen (other graphs may share the machine)."""
-    from cpg_walker.nodes.graph import domain_is_quiet, random_domain_id
+    from cpg_walker.graph.processes import domain_is_quiet, random_domain_id
 
     chosen: list[int] = []
     tries = 0

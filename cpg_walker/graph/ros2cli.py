@@ -1,6 +1,6 @@
 """``ros2 param`` / ``ros2 topic``-like tools for a pip-only install (no ros2cli): the core of
-``cpg-walker param`` and ``cpg-walker topic`` (node listing/info and topic info: rostools_graph.py;
-``topic pub``: rostools_pub.py).
+``cpg-walker param`` and ``cpg-walker topic`` (node listing/info and topic info: ros2cli_graph.py;
+``topic pub``: ros2cli_pub.py).
 
 Everything goes through the real ROS graph: the nodes' parameter services (rcl_interfaces
 ListParameters / GetParameters / SetParameters) and subscriptions to the topics, with the message types
@@ -23,7 +23,7 @@ from cpg_walker.nodes.messages import message_class
 
 def domain_id() -> int:
     """The DDS domain the tools join: ``ROS_DOMAIN_ID`` or 0."""
-    from cpg_walker.nodes.graph import env_domain_id
+    from cpg_walker.graph.processes import env_domain_id
 
     domain = env_domain_id()
     return 0 if domain is None else domain
