@@ -75,6 +75,7 @@ from cpg_walker.nodes.runtime import (
 )
 from cpg_walker.nodes.validation import check_finite_scalar, reason_key, to_ns, validate_imu, validate_load
 from cpg_walker.walker import feedback as feedback_core
+from cpg_walker.walker import storage
 from cpg_walker.walker.cmd_vel import (
     LIMIT_KEYS,
     CmdVelFollower,
@@ -363,7 +364,7 @@ class CPGNode(Node):
         self.timing = TickStats()
         self.stage = "learning"
         self.ctrl, self.origin, self.converged = self._controller(cpg_file, n_osc or None)
-        self.learned = self.ctrl.to_dict()  # the loaded network, to start over from (a sim reset)
+        self.learned = storage.to_dict(self.ctrl)  # the loaded network, to start over from (a sim reset)
         self._new_source(FeedbackController(fb_cfg, pathways), zeta, alpha)
         self._declare_cmd_vel(zeta)
         self._warm_up()
@@ -457,7 +458,7 @@ class CPGNode(Node):
         old = self.last_tick_ns
         self.get_logger().warn(f"/clock went back from {old / 1e9:.3f} s to {t_ns / 1e9:.3f} s (sim "
                                "restarted): starting the CPG over")
-        self.ctrl = HumanoidCPG.from_dict(self.learned)
+        self.ctrl = storage.from_dict(self.learned)
         fb = self.source.fb
         self.fade.u = self.fade.weight = 0.0
         self._new_source(FeedbackController(fb.cfg, fb.pathways), self.get_parameter("zeta").value,
@@ -557,7 +558,7 @@ class CPGNode(Node):
         are compiled or loaded on first use (about 1 s with numba), which must not happen at the
         hand-over tick mid-walk (in real time the robot would go without targets and fall)."""
         t0 = time.perf_counter()
-        spare = HumanoidCPG.from_dict(self.ctrl.to_dict())
+        spare = storage.from_dict(storage.to_dict(self.ctrl))
         spare.set_zeta(WARM_UP_COMMAND * spare.zeta_command or WARM_UP_COMMAND)
         spare.set_alpha(WARM_UP_COMMAND * spare.alpha_command or WARM_UP_COMMAND)
         for _ in range(3):
