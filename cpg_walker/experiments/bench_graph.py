@@ -1,4 +1,4 @@
-"""Benchmark section ``graph``: the ROS graph's speed (registered in experiments/bench.py SECTIONS).
+"""Benchmark section ``graph``: the ROS graph's speed (registered in experiments/bench_sections.py).
 
 Measures, each in its own isolated DDS domain with real node processes:
   * real-time factor of sim_node + pid_node (standing, config/sim.yaml's control period) in each pacing;

@@ -1,4 +1,4 @@
-"""Benchmark section ``realtime``: does watching the real-time graph hurt it? (experiments/bench.py SECTIONS)
+"""Benchmark section ``realtime``: does watching the real-time graph hurt it? (experiments/bench_sections.py)
 
 The CPG walk (sim_node + pid_node + cpg_node, realtime pacing, each run in its own DDS domain) with
   * 0, 1 or 3 attached subscribers: 1 = ``cpg-walker topic echo /joint_states`` (500 Hz, YAML to a pipe);
