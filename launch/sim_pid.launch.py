@@ -4,7 +4,7 @@
 Each node gets its parameters file from the package's share/config (config/<node name>.yaml: every
 value's one home); a launch argument given on the command line overrides the file's value (left empty,
 the file's stands). The CPG walk: walk.launch.py. Without ROS's launch tools (a pip install), use
-``cpg-walker graph`` (cpg_walker.nodes.graph.Graph).
+``cpg-walker graph`` (cpg_walker.graph.processes.Graph).
 """
 
 import os

@@ -19,7 +19,7 @@ def ros_domain(request, monkeypatch):
         return
     from ros_helpers import kill_nodes, reserve_domain
 
-    import cpg_walker.nodes.graph as graph_module
+    import cpg_walker.graph.processes as graph_module
 
     domain, lock = reserve_domain()
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
@@ -37,7 +37,7 @@ def ros_domain(request, monkeypatch):
 
 @pytest.fixture
 def graph(tmp_path, ros_domain):
-    from cpg_walker.nodes.graph import Graph
+    from cpg_walker.graph.processes import Graph
 
     g = Graph(tmp_path / "logs", domain_id=ros_domain)
     yield g

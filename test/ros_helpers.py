@@ -46,7 +46,7 @@ def reserve_domain() -> tuple[int, IO]:
     """A DDS domain in 1..101 held by this process alone (an exclusive ``flock`` on its lock file, released
     when the returned file is closed or the process dies) on which no other node is seen: two test runs
     on one machine never share a domain, whatever their timing."""
-    from cpg_walker.nodes.graph import domain_is_quiet
+    from cpg_walker.graph.processes import domain_is_quiet
 
     LOCK_DIR.mkdir(exist_ok=True)
     candidates = list(range(1, 102))

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from cpg_walker.timing import CLOCK_JUMP_NS
+from cpg_walker.walker import storage
 from cpg_walker.walker.cmd_vel import CmdVelLimits, SpeedMap
 from cpg_walker.walker.cpg_driver import REJOIN_AFTER_S, CPGDriver, FeedbackFade
 from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController, default_pathways
@@ -99,7 +100,7 @@ def test_a_late_first_tick_re_enters_from_the_crouch_after_standing_by() -> None
     assert out.sent and d.reentries == 1 and d.rejoined_at_s == pytest.approx((t0 + 100 * MS) / 1e9)
     assert d.walk_from_s == pytest.approx(d.rejoined_at_s + d.source.blend)
     assert out.said("joined a running sim at 30.100 s: re-entering the gait from the standing crouch")
-    d2, out2 = _make(ctrl.__class__.from_dict(ctrl.to_dict()), {**settings, "rejoin_settle_ns": 100 * MS,
+    d2, out2 = _make(storage.from_dict(storage.to_dict(ctrl)), {**settings, "rejoin_settle_ns": 100 * MS,
                                                                 "lockstep": True})
     d2.clock(t0)  # lockstep: at once
     assert d2.reentries == 1 and out2.sent

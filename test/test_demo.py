@@ -94,7 +94,7 @@ def test_status_off_a_terminal_is_plain_lines():
 # ------------------------------------------------------------------------------------- end to end
 
 def _demo(out, ros_domain, duration: float) -> subprocess.Popen:
-    from cpg_walker.nodes.graph import isolated_env
+    from cpg_walker.graph.processes import isolated_env
 
     return subprocess.Popen(
         [sys.executable, "-m", "cpg_walker.cli.main", "demo", "--duration", str(duration), "--out", str(out)],

@@ -299,9 +299,9 @@ def _build() -> Real:
     from rclpy.signals import SignalHandlerOptions
 
     import cpg_walker.nodes.sim_node as sim_module
+    from cpg_walker.graph.processes import random_domain_id
     from cpg_walker.nodes.cpg_node import CPGNode
     from cpg_walker.nodes.foxglove_node import FoxgloveNode
-    from cpg_walker.nodes.graph import random_domain_id
     from cpg_walker.nodes.pid_node import PidNode
     from cpg_walker.nodes.recorder_node import RecorderNode
     from cpg_walker.nodes.relay_node import RelayNode

@@ -10,6 +10,7 @@ from cpg_walker.cpg.hopf import phase as oscillator_phase
 from cpg_walker.paths import config_path
 from cpg_walker.robot.contact import TouchdownDetector
 from cpg_walker.robot.hoap2 import tilt_from_quat
+from cpg_walker.walker import storage
 from cpg_walker.walker.controller import HumanoidCPG
 from cpg_walker.walker.feedback import (
     ANKLE1,
@@ -39,7 +40,7 @@ def _quat(roll: float, pitch: float) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def ctrl() -> HumanoidCPG:
-    return HumanoidCPG.load(config_path("cpg_humanoid.yaml"))
+    return storage.load(config_path("cpg_humanoid.yaml"))
 
 
 def test_gains_eq19_20():
@@ -191,7 +192,7 @@ def test_feedback_trace_keeps_one_sample_per_trace_period(ctrl):
     """The g trace has a sample every 10 ms of sim time from 2 ms ticks (float equality dropped some)."""
     from cpg_walker.walker.gait_source import FeedbackGaitSource
 
-    src = FeedbackGaitSource(HumanoidCPG.from_dict(ctrl.to_dict()),
+    src = FeedbackGaitSource(storage.from_dict(storage.to_dict(ctrl)),
                              FeedbackController(FeedbackConfig.load(), ("lateral",)))
     h = ctrl.settings.control_dt
     k0 = int(np.ceil(src.active_from / h))

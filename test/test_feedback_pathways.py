@@ -11,6 +11,7 @@ from cpg_walker.cpg.hopf import phase as oscillator_phase
 from cpg_walker.paths import config_path
 from cpg_walker.robot.contact import TouchdownDetector
 from cpg_walker.robot.joints import JOINT_NAMES
+from cpg_walker.walker import storage
 from cpg_walker.walker.controller import HumanoidCPG
 from cpg_walker.walker.feedback import (
     ANKLE1,
@@ -42,11 +43,11 @@ def _yawed(yaw: float) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def learned() -> dict:
-    return HumanoidCPG.load(config_path("cpg_humanoid.yaml")).to_dict()
+    return storage.to_dict(storage.load(config_path("cpg_humanoid.yaml")))
 
 
 def _ctrl(learned: dict) -> HumanoidCPG:
-    return HumanoidCPG.from_dict(learned)
+    return storage.from_dict(learned)
 
 
 # ----------------------------------------------------------------------------------------- amplitude

@@ -232,7 +232,7 @@ def test_foxglove_client_sees_the_robot_and_sets_zeta(graph, probe) -> None:
 
 
 def test_graph_spec_starts_the_bridge_with_its_address_and_overrides() -> None:
-    from cpg_walker.nodes.graph_runner import GraphSpec
+    from cpg_walker.graph.runner import GraphSpec
 
     spec = GraphSpec(foxglove="0.0.0.0:9001", params=[("foxglove_node", "display_rate", 20.0)])
     assert spec.node_params()["foxglove_node"] == {"host": "0.0.0.0", "port": 9001, "display_rate": 20.0}
@@ -324,14 +324,14 @@ def test_the_bridge_takes_its_packaged_file_and_refuses_what_it_cannot_forward(g
 
 
 def test_the_shipped_layout_is_the_generated_one() -> None:
-    """docs/foxglove_layout.json == a fresh ``python -m cpg_walker.nodes.foxglove_layout``; its plots name
+    """docs/foxglove_layout.json == a fresh ``python -m cpg_walker.graph.foxglove_layout``; its plots name
     channels the bridge serves."""
     from pathlib import Path
 
-    from cpg_walker.nodes.foxglove_layout import layout_json
+    from cpg_walker.graph.foxglove_layout import layout_json
 
     shipped = Path(__file__).resolve().parent.parent / "docs" / "foxglove_layout.json"
-    assert shipped.read_text() == layout_json(), "regenerate: python -m cpg_walker.nodes.foxglove_layout"
+    assert shipped.read_text() == layout_json(), "regenerate: python -m cpg_walker.graph.foxglove_layout"
     paths = re.findall(r'"value": "(/[^."\[]+(?:/[^."\[]+)*)', shipped.read_text())
     assert paths and set(paths) <= set(CHANNELS), set(paths) - set(CHANNELS)
 
@@ -365,7 +365,7 @@ def test_a_taken_port_is_one_clear_error_and_starts_nothing(ros_domain, tmp_path
     import io
     import socket
 
-    from cpg_walker.nodes.graph_runner import GraphSpec, run_foreground
+    from cpg_walker.graph.runner import GraphSpec, run_foreground
 
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))

@@ -11,6 +11,7 @@ import yaml
 from cpg_walker.experiments.learn import free_run_errors
 from cpg_walker.paths import config_path
 from cpg_walker.robot.joints import JOINT_NAMES
+from cpg_walker.walker import storage
 from cpg_walker.walker.controller import CHAIN, DOFS, HIP2_PAIR, HumanoidCPG
 from cpg_walker.walker.gait_source import CPGGaitSource
 from cpg_walker.walker.learning import learning_settings
@@ -24,7 +25,7 @@ RMS_BOUND_N10_DEG = 0.5
 
 @pytest.fixture(scope="module")
 def committed() -> HumanoidCPG:
-    return HumanoidCPG.load(config_path("cpg_humanoid.yaml"))
+    return storage.load(config_path("cpg_humanoid.yaml"))
 
 
 @pytest.fixture(scope="module")
@@ -78,10 +79,10 @@ def test_committed_file_matches_recording(committed):
 
 
 def test_yaml_round_trip_exact(committed, tmp_path):
-    p1 = committed.save(tmp_path / "a.yaml")
-    again = HumanoidCPG.load(p1)
-    assert again.to_dict() == committed.to_dict()
-    p2 = again.save(tmp_path / "b.yaml")
+    p1 = storage.save(committed, tmp_path / "a.yaml")
+    again = storage.load(p1)
+    assert storage.to_dict(again) == storage.to_dict(committed)
+    p2 = storage.save(again, tmp_path / "b.yaml")
     assert p1.read_text() == p2.read_text()
     for name in ("omega", "alpha", "phi"):
         assert np.array_equal(getattr(again.net, name), getattr(committed.net, name))
@@ -90,12 +91,12 @@ def test_yaml_round_trip_exact(committed, tmp_path):
 
 
 def _corrupt(committed, tmp_path, mutate) -> str:
-    d = copy.deepcopy(committed.to_dict())
+    d = copy.deepcopy(storage.to_dict(committed))
     mutate(d)
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(d))
     with pytest.raises(ValueError) as exc:
-        HumanoidCPG.load(path)
+        storage.load(path)
     return str(exc.value)
 
 
@@ -115,9 +116,9 @@ def test_corrupt_files_name_the_problem(committed, tmp_path):
     bad = tmp_path / "broken.yaml"
     bad.write_text("schema_version: [1\n")
     with pytest.raises(ValueError, match="not valid YAML"):
-        HumanoidCPG.load(bad)
+        storage.load(bad)
     with pytest.raises(FileNotFoundError, match="cpg-walker learn"):
-        HumanoidCPG.load(tmp_path / "missing.yaml")
+        storage.load(tmp_path / "missing.yaml")
 
 
 def _targets(ctrl: HumanoidCPG, duration: float, commands: dict[float, tuple[float, float]],
@@ -149,7 +150,7 @@ def test_modulation_is_smooth(committed):
     assert np.all(np.isfinite(q))
     assert _max_jerk(q, h) < 3.0 * base, (_max_jerk(q, h), base)
     # without the filter (instantaneous ζ) the jerk at the command is far larger: the test can fail
-    committed_fast = HumanoidCPG.from_dict(committed.to_dict())
+    committed_fast = storage.from_dict(storage.to_dict(committed))
     object.__setattr__(committed_fast.settings, "modulation_time_constant", 0.0)
     q_fast = _targets(committed_fast, 12.0, steps)
     assert _max_jerk(q_fast, h) > 10 * base

@@ -51,9 +51,9 @@ def walk(tmp_path_factory):
     """The recorded walk (and the side recording), once for the module, on a domain of its own."""
     from ros_helpers import ANSWER_S, kill_nodes, reserve_domain, sim_deadline
 
-    import cpg_walker.nodes.graph as graph_module
+    import cpg_walker.graph.processes as graph_module
     from cpg_walker.experiments.walk_graph import run_graph_walk
-    from cpg_walker.nodes.graph import isolated_env
+    from cpg_walker.graph.processes import isolated_env
 
     out = tmp_path_factory.mktemp("walk")
     side = out / "side"

@@ -11,7 +11,7 @@ from cpg_walker.robot.gait_data import GaitPlayback, load_gait
 from cpg_walker.robot.hoap2 import Hoap2Sim
 from cpg_walker.robot.joints import JOINT_NAMES, LEG_JOINTS
 from cpg_walker.robot.pid import PidLaw, load_pid_config
-from cpg_walker.walker.controller import HumanoidCPG
+from cpg_walker.walker import storage
 from cpg_walker.walker.gait_source import CPGGaitSource
 from cpg_walker.walker.loop import control_period, run_replay, summarize
 
@@ -139,7 +139,7 @@ def test_lean_loop_equals_the_plain_loop_through_the_cpg_handover():
     cfg = load_pid_config()
     runs = []
     for lean in (True, False):
-        ctrl = HumanoidCPG.load(config_path("cpg_humanoid.yaml"))
+        ctrl = storage.load(config_path("cpg_humanoid.yaml"))
         source = CPGGaitSource(ctrl, handover_s=0.1, blend_s=0.2)
         sim, pid = Hoap2Sim(), PidLaw.from_config(config=cfg)
         if lean:

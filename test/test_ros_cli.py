@@ -86,7 +86,7 @@ def test_param_and_topic_tools_against_a_running_graph(graph, probe):
 
 
 def test_graph_command_ends_by_itself_and_leaves_nothing_behind(tmp_path, ros_domain):
-    from cpg_walker.nodes.graph import isolated_env
+    from cpg_walker.graph.processes import isolated_env
 
     env = isolated_env(ros_domain)
     p = subprocess.Popen([sys.executable, "-m", "cpg_walker.cli.main", "graph", "--duration", "3",

@@ -43,7 +43,7 @@ def test_dump_yaml_reads_back_through_rclpy_even_where_a_name_prefixes_another(t
     """cpg_node has ``feedback`` and ``feedback.<gain>``: no nesting below a name that is a parameter."""
     from rclpy.parameter import parameter_dict_from_yaml_file
 
-    from cpg_walker.nodes.rostools import from_parameter_value, parameters_yaml
+    from cpg_walker.graph.ros2cli import from_parameter_value, parameters_yaml
 
     values = {"feedback": True, "feedback.gain": 0.5, "feedback.sub.n": 3, "kp.leg": 100.0, "kp.arm": 30.0,
               "zeta": 0.8, "names": ["a", "b"], "gains": [1.0, 2.5]}
@@ -60,7 +60,7 @@ def test_pub_values_fill_nested_messages_and_refuse_what_does_not_fit():
     from builtin_interfaces.msg import Time
     from geometry_msgs.msg import Point
 
-    from cpg_walker.nodes.rostools_pub import build_message, qos_profile
+    from cpg_walker.graph.ros2cli_pub import build_message, qos_profile
 
     _, traj, stamps = build_message("trajectory_msgs/JointTrajectory",
                                     "{header: auto, joint_names: [a], points: [{positions: [1], "
@@ -98,8 +98,8 @@ def test_node_param_and_topic_info_against_a_running_node(graph, probe, tmp_path
     from rclpy.parameter import parameter_dict_from_yaml_file
     from sensor_msgs.msg import JointState
 
+    from cpg_walker.graph.ros2cli import from_parameter_value
     from cpg_walker.nodes.pid_node import GAIN_RANGES
-    from cpg_walker.nodes.rostools import from_parameter_value
 
     graph.start("pid_node")
     probe.listen("/joint_torques", JointState)

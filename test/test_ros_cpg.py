@@ -132,9 +132,9 @@ def test_runtime_zeta_and_alpha_change_the_gait(graph, probe, tmp_path):
     from cpg_walker.experiments.replay_graph import record_to_result
     from cpg_walker.paths import config_path
     from cpg_walker.robot.run_record import RunRecord
-    from cpg_walker.walker.controller import HumanoidCPG
+    from cpg_walker.walker import storage
 
-    period = HumanoidCPG.load(config_path("cpg_humanoid.yaml")).period  # learned stride period (2.513 s)
+    period = storage.load(config_path("cpg_humanoid.yaml")).period  # learned stride period (2.513 s)
     t_zeta, settle, strides, settle_alpha = 7.0, 2.5, 4, 5.0  # sim s (the CPG has taken over at 6.6 s)
     probe.listen("/cpg/state", Float64MultiArray, 500)
     probe.listen("/diagnostics", DiagnosticArray, 500)

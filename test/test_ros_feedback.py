@@ -162,7 +162,7 @@ def test_feedback_parameters_and_stale_sensor_fade(graph, probe):
     from rcl_interfaces.msg import ParameterType, ParameterValue
     from sensor_msgs.msg import JointState
 
-    from cpg_walker.nodes.rostools import from_parameter_value
+    from cpg_walker.graph.ros2cli import from_parameter_value
 
     cpg = graph.start("cpg_node", feedback_fade=0.3, sensor_timeout=0.05)
     probe.listen("/diagnostics", DiagnosticArray, 500)

@@ -84,7 +84,7 @@ def walking():
     from ros_helpers import START_S, Probe, kill_nodes, reserve_domain
     from sensor_msgs.msg import JointState
 
-    from cpg_walker.nodes.graph import Graph
+    from cpg_walker.graph.processes import Graph
 
     domain, lock = reserve_domain()
     graph = Graph(Path(tempfile.mkdtemp(prefix="fuzz_logs_")), domain_id=domain)
@@ -156,7 +156,7 @@ def _call(probe, srv_type, name: str, request):
 
 
 def _same(a, b) -> bool:
-    from cpg_walker.nodes.rostools import from_parameter_value
+    from cpg_walker.graph.ros2cli import from_parameter_value
 
     x, y = from_parameter_value(a), from_parameter_value(b)
     return a.type == b.type and (x == y or (isinstance(x, float) and math.isnan(x) and math.isnan(y)))

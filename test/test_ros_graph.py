@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from ros_helpers import ANSWER_S, START_S, Probe, double, sim_deadline, string
 
-from cpg_walker.nodes.graph import Graph
+from cpg_walker.graph.processes import Graph
 from cpg_walker.nodes.messages import stamp_ns
 from cpg_walker.robot.joints import JOINT_NAMES
 
@@ -321,7 +321,7 @@ def test_pid_gains_are_runtime_parameters_and_validated(graph, probe):
     values = probe.get_params("pid", ["kp.leg", "target_timeout"])
     assert values[0].double_value == 120.0 and values[1].double_value == pytest.approx(0.1)
     # the harness sees this graph on its domain, so another graph would not pick it
-    from cpg_walker.nodes.graph import domain_is_quiet
+    from cpg_walker.graph.processes import domain_is_quiet
 
     assert not domain_is_quiet(graph.domain_id, wait=ANSWER_S)
 

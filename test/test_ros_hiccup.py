@@ -123,7 +123,7 @@ def test_the_robot_walks_with_an_echo_and_a_subscriber_to_every_topic(graph, pro
     echo has printed states from well after the hand-over and the walk is AFTER_S past it: how soon the
     echo starts printing depends on the CPU the nodes leave it (they run first), so the run's end is a
     condition on what the watchers got, not a fixed length."""
-    from cpg_walker.nodes.rostools import message_class
+    from cpg_walker.nodes.messages import message_class
 
     record = tmp_path / "record.json"
     cap = 120.0  # sim s: the sim ends by itself here if the condition never comes

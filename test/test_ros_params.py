@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cpg_walker.nodes.graph import NODES
-from cpg_walker.nodes.rostools import from_parameter_value
+from cpg_walker.graph.processes import NODES
+from cpg_walker.graph.ros2cli import from_parameter_value
 from cpg_walker.nodes.runtime import NODE_NAMES, params_file
 from cpg_walker.paths import ros_parameters
 from cpg_walker.robot.joints import JOINT_NAMES
@@ -76,7 +76,7 @@ def test_node_cli_and_inprocess_loop_share_one_value(graph, probe):
     """PID kp.leg, the control period and zeta: the live node's value (parameter service), what the CLI
     and the graph harness pass (the file, not a code default) and what the in-process loop uses."""
     from cpg_walker.experiments.cpg_walk import walk
-    from cpg_walker.nodes.graph_runner import GraphSpec
+    from cpg_walker.graph.runner import GraphSpec
     from cpg_walker.robot.hoap2 import Hoap2Sim
     from cpg_walker.robot.pid import PidLaw, load_pid_config
     from cpg_walker.walker.learning import cpg_defaults, load_controller
@@ -167,7 +167,7 @@ def test_a_bare_node_reads_its_packaged_file(exe, graph, probe):
 
 def test_a_misspelt_gain_in_a_params_file_is_one_clear_line(tmp_path):
     """A params file naming a gain group that does not exist: exit status 2, one line naming it."""
-    from cpg_walker.nodes.graph import isolated_env, random_domain_id
+    from cpg_walker.graph.processes import isolated_env, random_domain_id
 
     bad = tmp_path / "pid.yaml"
     bad.write_text("pid:\n  ros__parameters:\n    kp: {legg: 100.0}\n")
@@ -201,8 +201,8 @@ def test_cpg_node_reports_its_stage_not_a_phase():
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
+    from cpg_walker.graph.processes import random_domain_id
     from cpg_walker.nodes.cpg_node import CPGNode
-    from cpg_walker.nodes.graph import random_domain_id
 
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=random_domain_id(), signal_handler_options=SignalHandlerOptions.NO)

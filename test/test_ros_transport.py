@@ -35,7 +35,7 @@ def _relayed_walk(tmp_path_factory) -> SimpleNamespace:
     """The CPG walk (zeta 1, feedback on, realtime) through relay_node, on a domain of its own."""
     from ros_helpers import kill_nodes, reserve_domain, sim_deadline
 
-    import cpg_walker.nodes.graph as graph_module
+    import cpg_walker.graph.processes as graph_module
     from cpg_walker.experiments.walk_graph import run_graph_walk
 
     out = tmp_path_factory.mktemp("transport")

@@ -1,5 +1,5 @@
 """Two hosts (issue 14, part 5): sim_node in one network namespace, pid_node + cpg_node in another, joined
-by a veth pair the test creates and removes (nodes/netns.py; root and ``ip netns`` needed, else skipped).
+by a veth pair the test creates and removes (graph/netns.py; root and ``ip netns`` needed, else skipped).
 Each namespace has only lo and its veth end, so every message between the robot and its controllers
 crosses the link; discovery: the SUBNET range plus the other side's address as ROS_STATIC_PEERS
 (experiments/two_hosts.py). The walk is lockstep: other load on the machine slows it, never changes it.
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from cpg_walker.nodes import netns
+from cpg_walker.graph import netns
 from cpg_walker.paths import ros_parameters
 
 WHY_NOT = netns.unavailable()

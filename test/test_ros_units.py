@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cpg_walker.nodes.graph import isolated_env, param_arg
+from cpg_walker.graph.processes import isolated_env, param_arg
 from cpg_walker.nodes.validation import (
     check_finite_scalar,
     from_ns,

@@ -15,7 +15,7 @@ def _in_process(make):
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from cpg_walker.nodes.graph import random_domain_id
+    from cpg_walker.graph.processes import random_domain_id
 
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=random_domain_id(), signal_handler_options=SignalHandlerOptions.NO)

@@ -7,7 +7,7 @@ import argparse
 
 from cpg_walker.cli.checks import in_text_file, out_dir
 from cpg_walker.errors import InputError
-from cpg_walker.experiments.bench import SECTIONS
+from cpg_walker.experiments.bench_sections import SECTIONS
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from cpg_walker.errors import InputError
-from cpg_walker.nodes.graph import DOMAIN_RANGE
+from cpg_walker.graph.processes import DOMAIN_RANGE
 
 
 def _path(text: str) -> Path:

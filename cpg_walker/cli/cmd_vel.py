@@ -48,7 +48,7 @@ def _map(args: argparse.Namespace) -> int:
 
 def _drive(args: argparse.Namespace) -> int:
     if args.graph and args.attach and args.domain_id is None:
-        from cpg_walker.nodes.graph import env_domain_id
+        from cpg_walker.graph.processes import env_domain_id
 
         env_domain_id()  # InputError when ROS_DOMAIN_ID is not a domain
     if args.graph:

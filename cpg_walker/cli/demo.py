@@ -41,7 +41,7 @@ def _run(args: argparse.Namespace) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering; must precede the mujoco import
 
     from cpg_walker.experiments.demo import run_demo
-    from cpg_walker.nodes.graph_runner import resolve_domain
+    from cpg_walker.graph.runner import resolve_domain
 
     domain, how = resolve_domain(args.domain_id)
     if args.paper:

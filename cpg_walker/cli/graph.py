@@ -79,7 +79,7 @@ def parse_param(text: str) -> tuple[str, str, object]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from cpg_walker.nodes.graph_runner import GraphSpec, run_foreground
+    from cpg_walker.graph.runner import GraphSpec, run_foreground
 
     spec = GraphSpec(pacing=args.pacing, duration=args.duration, zeta=args.zeta, alpha=args.alpha,
                      player=args.player, domain_id=args.domain_id,

@@ -1,5 +1,5 @@
 """`cpg-walker node list | info NODE`: `ros2 node` without ros2cli, on the domain in ROS_DOMAIN_ID, in
-ros2cli's output formats (core: cpg_walker.nodes.rostools_graph)."""
+ros2cli's output formats (core: cpg_walker.graph.ros2cli_graph)."""
 
 from __future__ import annotations
 
@@ -29,8 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _list(args: argparse.Namespace) -> int:
-    from cpg_walker.nodes import rostools as rt
-    from cpg_walker.nodes import rostools_graph as rg
+    from cpg_walker.graph import ros2cli as rt
+    from cpg_walker.graph import ros2cli_graph as rg
 
     with rt.Session("cpg_walker_node") as s:
         names = rg.list_nodes(s, args.all, timeout=args.wait)
@@ -49,8 +49,8 @@ def _list(args: argparse.Namespace) -> int:
 
 
 def _info(args: argparse.Namespace) -> int:
-    from cpg_walker.nodes import rostools as rt
-    from cpg_walker.nodes import rostools_graph as rg
+    from cpg_walker.graph import ros2cli as rt
+    from cpg_walker.graph import ros2cli_graph as rg
 
     node = rt.node_name(args.node)
     try:

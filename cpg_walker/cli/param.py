@@ -1,6 +1,6 @@
 """`cpg-walker param list|get|set|describe|dump NODE [NAME...] [VALUE]`: `ros2 param` without ros2cli,
 through the node's real parameter services on the domain in ROS_DOMAIN_ID, in ros2cli's output formats
-(core: cpg_walker.nodes.rostools)."""
+(core: cpg_walker.graph.ros2cli)."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from cpg_walker.nodes import rostools as rt
+    from cpg_walker.graph import ros2cli as rt
 
     try:
         with rt.Session("cpg_walker_param") as s:

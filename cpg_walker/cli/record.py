@@ -25,7 +25,7 @@ def recorder_argv(out: str, duration: float | None, wall_time: bool) -> list[str
     """recorder_node's command line: its parameters file, then the overrides (as Graph passes them)."""
     import math
 
-    from cpg_walker.nodes.graph import param_arg
+    from cpg_walker.graph.processes import param_arg
     from cpg_walker.nodes.runtime import params_file
 
     if duration is not None and not (duration >= 0 and math.isfinite(duration)):
@@ -42,7 +42,7 @@ def recorder_argv(out: str, duration: float | None, wall_time: bool) -> list[str
 def _run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from cpg_walker.nodes.graph import env_domain_id
+    from cpg_walker.graph.processes import env_domain_id
     from cpg_walker.nodes.recorder_node import main
 
     env_domain_id()  # InputError when ROS_DOMAIN_ID is not a domain

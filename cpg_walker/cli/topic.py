@@ -1,6 +1,6 @@
 """`cpg-walker topic list | echo TOPIC | hz TOPIC | info TOPIC | pub TOPIC TYPE [VALUES]`: `ros2 topic`
 without ros2cli, on the domain in ROS_DOMAIN_ID, generic over the message types discovered from the graph
-(core: cpg_walker.nodes.rostools, rostools_graph (info), rostools_pub (pub))."""
+(core: cpg_walker.graph.ros2cli, ros2cli_graph (info), ros2cli_pub (pub))."""
 
 from __future__ import annotations
 
@@ -108,7 +108,7 @@ def _register_pub(ps: argparse._SubParsersAction) -> None:
 
 
 def _list(args: argparse.Namespace) -> int:
-    from cpg_walker.nodes import rostools as rt
+    from cpg_walker.graph import ros2cli as rt
 
     with rt.Session("cpg_walker_topic") as s:
         topics = rt.topic_types(s, timeout=args.wait)
@@ -122,7 +122,7 @@ def _list(args: argparse.Namespace) -> int:
 
 
 def _echo(args: argparse.Namespace) -> int:
-    from cpg_walker.nodes import rostools as rt
+    from cpg_walker.graph import ros2cli as rt
 
     count = 1 if args.once else args.count
     if count is not None and count < 1:
@@ -139,7 +139,7 @@ def _echo(args: argparse.Namespace) -> int:
 
 
 def _hz(args: argparse.Namespace) -> int:
-    from cpg_walker.nodes import rostools as rt
+    from cpg_walker.graph import ros2cli as rt
 
     rt.RateMeter(args.window)  # validates --window before joining the graph
     try:
@@ -156,8 +156,8 @@ def _hz(args: argparse.Namespace) -> int:
 
 
 def _info(args: argparse.Namespace) -> int:
-    from cpg_walker.nodes import rostools as rt
-    from cpg_walker.nodes import rostools_graph as rg
+    from cpg_walker.graph import ros2cli as rt
+    from cpg_walker.graph import ros2cli_graph as rg
 
     try:
         with rt.Session("cpg_walker_topic") as s:
@@ -170,8 +170,8 @@ def _info(args: argparse.Namespace) -> int:
 
 
 def _pub(args: argparse.Namespace) -> int:
-    from cpg_walker.nodes import rostools as rt
-    from cpg_walker.nodes import rostools_pub as rp
+    from cpg_walker.graph import ros2cli as rt
+    from cpg_walker.graph import ros2cli_pub as rp
 
     times = 1 if args.once else args.times
     wait = args.wait_matching_subscriptions

@@ -26,7 +26,7 @@ def _run(args: argparse.Namespace) -> int:
 
     from cpg_walker.errors import InputError
     from cpg_walker.experiments.two_hosts import compare
-    from cpg_walker.nodes.netns import unavailable
+    from cpg_walker.graph.netns import unavailable
 
     why = unavailable()
     if why:

@@ -14,17 +14,8 @@ import sys
 import time
 from pathlib import Path
 
-# name -> "module:function". Each later issue adds its own section here.
-SECTIONS: dict[str, str] = {
-    "cpg": "cpg_walker.experiments.bench_cpg:run",
-    "robot": "cpg_walker.experiments.bench_robot:run",
-    "humanoid": "cpg_walker.experiments.bench_humanoid:run",
-    "loop": "cpg_walker.experiments.bench_loop:run",
-    "graph": "cpg_walker.experiments.bench_graph:run",
-    "realtime": "cpg_walker.experiments.bench_realtime:run",
-    "oscillators": "cpg_walker.experiments.bench_scaling:run_oscillators",
-    "robots": "cpg_walker.experiments.bench_scaling:run_robots",
-}
+from cpg_walker.experiments import bench_report
+from cpg_walker.experiments.bench_sections import SECTIONS
 
 
 def _load() -> dict:
@@ -81,8 +72,6 @@ def run_benchmarks(out_dir: str | Path, only: list[str] | None = None, quick: bo
     """Run the sections (``only``: these), write bench.json, bench.md (every figure), bench_table.md (the
     summary tables, experiments/bench_report.py) and the scaling plots into ``out_dir``; with ``readme``,
     replace that file's generated benchmark block by the summary tables too."""
-    from cpg_walker.experiments import bench_report
-
     unknown = sorted(set(only or []) - set(SECTIONS))
     if unknown:
         raise ValueError(f"unknown benchmark section(s) {unknown}; known: {sorted(SECTIONS)}")

@@ -1,4 +1,4 @@
-"""Benchmark section ``graph``: the ROS graph's speed (registered in experiments/bench.py SECTIONS).
+"""Benchmark section ``graph``: the ROS graph's speed (registered in experiments/bench_sections.py).
 
 Measures, each in its own isolated DDS domain with real node processes:
   * real-time factor of sim_node + pid_node (standing, config/sim.yaml's control period) in each pacing;
@@ -114,7 +114,7 @@ def per_period_costs(n: int = 1000) -> dict:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from cpg_walker.nodes.graph import random_domain_id
+    from cpg_walker.graph.processes import random_domain_id
     from cpg_walker.nodes.runtime import params_file
     from cpg_walker.nodes.sim_node import SimNode
 
@@ -171,7 +171,7 @@ def pingpong_latency(mode: str = "hotpath", n: int = 500, period: float = 0.002,
     from sensor_msgs.msg import JointState
 
     from cpg_walker.experiments.replay_graph import stop_process
-    from cpg_walker.nodes.graph import isolated_env, quiet_domain_id
+    from cpg_walker.graph.processes import isolated_env, quiet_domain_id
     from cpg_walker.nodes.messages import stamp, stamp_ns
     from cpg_walker.robot.joints import JOINT_NAMES
 
@@ -267,7 +267,7 @@ def third_process_rates(window: float = 2.0, start_timeout: float = 120.0) -> di
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import JointState
 
-    from cpg_walker.nodes.graph import Graph
+    from cpg_walker.graph.processes import Graph
     from cpg_walker.nodes.messages import stamp_ns
 
     topics = {"/joint_states": JointState, "/joint_torques": JointState, "/odom/ground_truth": Odometry}

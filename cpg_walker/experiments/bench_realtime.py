@@ -1,4 +1,4 @@
-"""Benchmark section ``realtime``: does watching the real-time graph hurt it? (experiments/bench.py SECTIONS)
+"""Benchmark section ``realtime``: does watching the real-time graph hurt it? (experiments/bench_sections.py)
 
 The CPG walk (sim_node + pid_node + cpg_node, realtime pacing, each run in its own DDS domain) with
   * 0, 1 or 3 attached subscribers: 1 = ``cpg-walker topic echo /joint_states`` (500 Hz, YAML to a pipe);
@@ -195,7 +195,7 @@ def per_period_cpu(n: int = 500) -> dict:
 
     import rclpy
 
-    from cpg_walker.nodes.graph import random_domain_id
+    from cpg_walker.graph.processes import random_domain_id
     from cpg_walker.nodes.runtime import params_file
     from cpg_walker.nodes.sim_node import SimNode
     from cpg_walker.robot.contact import sole_wrenches
@@ -281,7 +281,7 @@ def run(quick: bool = False) -> dict:
 def subscribe_all(settle: float = 3.0) -> int:
     """Subscribe to every topic of the graph (the environment's domain) with a QoS matching its publishers,
     count the messages, print ``received {json}`` on SIGINT/SIGTERM. Topics appearing later are added."""
-    from cpg_walker.nodes import rostools as rt
+    from cpg_walker.graph import ros2cli as rt
 
     counts: dict[str, int] = {}
     stop = []

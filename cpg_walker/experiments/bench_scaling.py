@@ -63,17 +63,17 @@ def run_oscillators(quick: bool = False) -> dict:
 def _vectorised(R: int, quick: bool) -> dict:
     """R robots' CPG networks: one stacked step vs R separate steps, playback and learning."""
     from cpg_walker.cpg.network import CPGNetwork, stack_networks
-    from cpg_walker.walker.controller import HumanoidCPG
+    from cpg_walker.walker import storage
     from cpg_walker.walker.learning import cpg_defaults, load_controller
 
     ctrl, _, _ = load_controller(cpg_defaults()["cpg_file"])
-    learned = ctrl.to_dict()
+    learned = storage.to_dict(ctrl)
     n, reps = (100, 3) if quick else (400, 5)
     out: dict = {}
     for backend in BACKENDS:
         played = []
         for r in range(R):  # each robot at its own phase
-            net = HumanoidCPG.from_dict(copy.deepcopy(learned)).net
+            net = storage.from_dict(copy.deepcopy(learned)).net
             net.backend = backend
             net.step(0.002 * (r + 1))
             played.append(net)
@@ -160,7 +160,7 @@ def _walk_record(m: dict) -> dict:
 
 def _distinct_domains(R: int) -> list[int]:
     """R different DDS domains on which no other node is seen (other graphs may share the machine)."""
-    from cpg_walker.nodes.graph import domain_is_quiet, random_domain_id
+    from cpg_walker.graph.processes import domain_is_quiet, random_domain_id
 
     chosen: list[int] = []
     tries = 0

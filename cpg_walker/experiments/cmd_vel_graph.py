@@ -53,8 +53,8 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Bool
 
-    from cpg_walker.nodes.graph import env_domain_id, isolated_env, quiet_domain_id
-    from cpg_walker.nodes.graph_runner import resolve_domain
+    from cpg_walker.graph.processes import env_domain_id, isolated_env, quiet_domain_id
+    from cpg_walker.graph.runner import resolve_domain
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

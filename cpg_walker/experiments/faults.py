@@ -92,7 +92,7 @@ class FaultGraph:
 
     def __init__(self, out_dir: str | Path, zeta: float = 1.0, domain_id: int | None = None,
                  say=None, pacing: str = "realtime"):
-        from cpg_walker.nodes.graph import Graph
+        from cpg_walker.graph.processes import Graph
 
         self.out = Path(out_dir)
         self.graph = Graph(self.out / "logs", domain_id=domain_id)

@@ -19,6 +19,7 @@ import numpy as np
 
 from cpg_walker.paths import share_dir
 from cpg_walker.robot.joints import paper_name
+from cpg_walker.walker import storage
 from cpg_walker.walker.controller import CHAIN, DOFS, HumanoidCPG, teaching_cycle
 from cpg_walker.walker.learning import DEFAULT_CPG_FILE, learning_settings, load_learning_config
 
@@ -82,9 +83,9 @@ def run_learn(out_dir: str, n_oscillators: int | None = None, install: bool = Fa
     ctrl, rep = HumanoidCPG.learn(cfg.get("gait", "walk"), settings, params, progress=progress)
     progress.total = float(rep.strides)  # the bar ends where learning stopped
     progress.close("converged" if rep.converged else "budget spent, NOT converged")
-    written = [ctrl.save(out / DEFAULT_CPG_FILE)]
+    written = [storage.save(ctrl, out / DEFAULT_CPG_FILE)]
     if install:
-        written.append(ctrl.save(share_dir() / "config" / DEFAULT_CPG_FILE))
+        written.append(storage.save(ctrl, share_dir() / "config" / DEFAULT_CPG_FILE))
     strides = int(cfg.get("figure", {}).get("strides", 3))
     t, Q, P, measured = free_run_errors(ctrl, strides)
     rms = np.degrees(np.sqrt(np.mean((Q - P) ** 2, axis=0)))

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpg_walker.nodes.graph import Graph, Placement
+from cpg_walker.graph.processes import Graph, Placement
 from cpg_walker.nodes.recorder_node import NAME as RECORDER_NAME
 from cpg_walker.nodes.relay_node import consumer_remaps
 from cpg_walker.nodes.runtime import PACINGS

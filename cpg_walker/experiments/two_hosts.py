@@ -1,7 +1,7 @@
 """``cpg-walker two-hosts``: the CPG walk with the robot on one "host" and its controllers on another.
 
 sim_node runs in network namespace a, pid_node and cpg_node in namespace b, joined by a veth pair
-(nodes/netns.py, created and removed here; root needed). Each namespace has only lo and its veth end, so
+(graph/netns.py, created and removed here; root needed). Each namespace has only lo and its veth end, so
 every DDS packet between the two sides crosses the link (sim_node is UDP-only: the namespaces share
 /dev/shm, two hosts would not), and discovery can reach nothing but the other address. Discovery: the
 SUBNET range plus the other side as ROS_STATIC_PEERS, which connected every time on this Fast DDS 2.14
@@ -20,8 +20,8 @@ import math
 from pathlib import Path
 
 from cpg_walker.experiments.walk_graph import run_graph_walk
-from cpg_walker.nodes.graph import Placement
-from cpg_walker.nodes.netns import Host, VethPair
+from cpg_walker.graph.netns import Host, VethPair
+from cpg_walker.graph.processes import Placement
 
 #: Discovery environment of a node on one side: automatic discovery on its subnet (inside the namespace:
 #: the veth's /30 and lo) and the other side's address as a static peer.

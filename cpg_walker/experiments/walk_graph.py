@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Protocol
 
 from cpg_walker.errors import InputError
-from cpg_walker.nodes.graph import Placement
+from cpg_walker.graph.processes import Placement
 from cpg_walker.nodes.recording import BAG_NAME
 from cpg_walker.walker.learning import cpg_defaults
 
@@ -101,7 +101,7 @@ class ParameterSchedule:
         from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
 
-        from cpg_walker.nodes.rostools import to_parameter_value
+        from cpg_walker.graph.ros2cli import to_parameter_value
 
         ctx = rclpy.Context()
         rclpy.init(context=ctx, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
@@ -241,7 +241,7 @@ def run_graph_walk(
             w.start(graph.domain_id)
             started.append(w)
         if view is not None:
-            from cpg_walker.nodes.graph_runner import start_foxglove
+            from cpg_walker.graph.runner import start_foxglove
 
             print(start_foxglove(graph, view), file=sys.stderr, flush=True)
         return []

@@ -106,12 +106,12 @@ _CTRL: dict[str, Any] = {}
 
 def _controller():
     """A fresh copy of the default learned CPG (loaded once per process)."""
-    from cpg_walker.walker.controller import HumanoidCPG
+    from cpg_walker.walker import storage
 
     if "ctrl" not in _CTRL:
         ctrl, _CTRL["origin"], _ = load_controller(cpg_defaults()["cpg_file"])
-        _CTRL["ctrl"] = ctrl.to_dict()
-    return HumanoidCPG.from_dict(copy.deepcopy(_CTRL["ctrl"]))
+        _CTRL["ctrl"] = storage.to_dict(ctrl)
+    return storage.from_dict(copy.deepcopy(_CTRL["ctrl"]))
 
 
 class _Recorder:

@@ -1,4 +1,5 @@
-"""ROS message building and reading for the nodes (message types only; no rclpy node machinery).
+"""ROS message building and reading for the nodes (message types only; no rclpy node machinery); a message
+type's class from its name (``message_class``).
 
 The builders of the messages published every control period return the message *serialized*: rclpy's
 ``Publisher.publish`` takes bytes as they are, which skips its field-by-field Python-to-C conversion
@@ -12,6 +13,7 @@ deserializes the output and compares it, field by field and bit for bit, with th
 from __future__ import annotations
 
 import array
+import importlib
 import struct
 from collections.abc import Sequence
 
@@ -23,6 +25,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from cpg_walker.errors import InputError, ToolError
 from cpg_walker.nodes.validation import (
     JointCommand,
     from_ns,
@@ -41,6 +44,18 @@ _MARK_BASE = -1.2345678901234567e-200
 _STAMP = struct.Struct("=iI")  # builtin_interfaces/Time, native byte order as the middleware writes it
 
 
+def message_class(type_name: str) -> type:
+    """``sensor_msgs/msg/JointState`` (or ``sensor_msgs/JointState``, as ros2 accepts) -> the generated
+    Python class."""
+    parts = type_name.split("/")
+    if len(parts) == 2:
+        parts.insert(1, "msg")
+    if len(parts) != 3 or not all(parts):
+        raise InputError(f"not a message type: {type_name!r} (expected pkg/msg/Type)")
+    try:
+        return getattr(importlib.import_module(f"{parts[0]}.{parts[1]}"), parts[2])
+    except (ImportError, AttributeError) as exc:
+        raise ToolError(f"message type {type_name} is not installed in this Python ({exc})") from None
 
 
 def darray(x: np.ndarray) -> array.array:

@@ -21,6 +21,8 @@ from pathlib import Path
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from cpg_walker.errors import ToolError
+from cpg_walker.nodes.messages import message_class
 from cpg_walker.nodes.recording import CLOCK_TOPIC, BagRecorder
 from cpg_walker.nodes.runtime import (
     HotPath,
@@ -89,8 +91,6 @@ class RecorderNode(Node):
 
     def scan(self) -> None:
         """Subscribe to every topic that has a publisher and is not recorded yet."""
-        from cpg_walker.nodes.rostools import ToolError, message_class
-
         added = False
         for topic, types in self.get_topic_names_and_types():
             if topic in self.subs or topic in self.skipped:

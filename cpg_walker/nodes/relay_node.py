@@ -26,6 +26,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
 from cpg_walker.nodes.lossy_link import MAX_DELAY_S, MAX_JITTER_S, LossyLink, link_error
+from cpg_walker.nodes.messages import message_class
 from cpg_walker.nodes.runtime import (
     HotPath,
     declare,
@@ -75,8 +76,6 @@ class RelayNode(Node):
 
     def __init__(self, **node_options) -> None:
         from rclpy.qos import QoSProfile
-
-        from cpg_walker.nodes.rostools import message_class
 
         super().__init__(NAME, **node_options)
         topics = list(declare(self, "topics", strs_param("topics to relay", read_only=True)))

@@ -1,6 +1,7 @@
 """The humanoid CPG controller (paper Section III-A): 10 generic CPGs, one per controlled DOF, coupled.
 
-Pure numpy (no rclpy, no MuJoCo): learning, playback, modulation, a run_replay target source and YAML I/O.
+Pure numpy (no rclpy, no MuJoCo): learning, playback, modulation, a run_replay target source. Its YAML
+file: walker/storage.py (``storage.load``/``save``/``to_dict``/``from_dict``), which imports this module.
 
 Architecture (Fig 5), over ``robot.joints.CONTROLLED_JOINTS`` (Hip1, Hip2, Knee, Ankle1, Ankle2 of the
 left, then the right leg), B = 10 CPGs of N oscillators each (the paper: N = 3):
@@ -53,7 +54,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -486,29 +486,6 @@ class HumanoidCPG:
         with np.errstate(divide="ignore", invalid="ignore"):
             out = dn * e[2] + n * dn / d * Le[2] + 0.5 * n * (n - 1) * dn / (d * d) * L2e[2]
         return command + out
-
-    # ------------------------------------------------------------------ storage (walker/storage.py)
-    def to_dict(self) -> dict:
-        from cpg_walker.walker import storage
-
-        return storage.to_dict(self)
-
-    def save(self, path: str | Path) -> Path:
-        from cpg_walker.walker import storage
-
-        return storage.save(self, path)
-
-    @classmethod
-    def from_dict(cls, d: object, where: str = "CPG file") -> HumanoidCPG:
-        from cpg_walker.walker import storage
-
-        return storage.from_dict(d, where)
-
-    @classmethod
-    def load(cls, path: str | Path) -> HumanoidCPG:
-        from cpg_walker.walker import storage
-
-        return storage.load(path)
 
 
 # --------------------------------------------------------------------------------------- helpers

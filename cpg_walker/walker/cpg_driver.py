@@ -26,6 +26,7 @@ from typing import Protocol
 import numpy as np
 
 from cpg_walker.timing import CLOCK_JUMP_NS, ActivityStats, StampGuard, TickStats
+from cpg_walker.walker import storage
 from cpg_walker.walker.cmd_vel import CmdVelFollower, CmdVelLimits, CmdVelOutput, SpeedMap, apply_output
 from cpg_walker.walker.controller import HumanoidCPG
 from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
@@ -150,7 +151,7 @@ class CPGDriver:
                  sensor_wait_s: float = 0.4, wall: Callable[[], float] = time.monotonic) -> None:
         self.out, self.wall = out, wall
         self.ctrl = ctrl
-        self.learned_network = ctrl.to_dict()  # the loaded network, to start over from (a sim reset)
+        self.learned_network = storage.to_dict(ctrl)  # the loaded network, to start over from (a sim reset)
         self.zeta, self.alpha = float(zeta), float(alpha)  # the commanded values (the parameters')
         self.lookahead, self.lockstep, self.sensor_wait_s = bool(lookahead), bool(lockstep), sensor_wait_s
         self.monitor_period_ns, self.rejoin_settle_ns = int(monitor_period_ns), int(rejoin_settle_ns)
@@ -216,7 +217,7 @@ class CPGDriver:
         kernels are compiled or loaded on first use (about 1 s with numba), which must not happen at the
         hand-over tick mid-walk (in real time the robot would go without targets and fall). Wall s."""
         t0 = time.perf_counter()
-        spare = HumanoidCPG.from_dict(self.ctrl.to_dict())
+        spare = storage.from_dict(storage.to_dict(self.ctrl))
         spare.set_zeta(WARM_UP_COMMAND * spare.zeta_command or WARM_UP_COMMAND)
         spare.set_alpha(WARM_UP_COMMAND * spare.alpha_command or WARM_UP_COMMAND)
         for _ in range(3):
@@ -420,7 +421,7 @@ class CPGDriver:
         would (its first tick at t_ns)."""
         self.out.log("warn", f"/clock went back from {self.last_tick_ns / 1e9:.3f} s to {t_ns / 1e9:.3f} s "
                      "(sim restarted): starting the CPG over")
-        self.ctrl = HumanoidCPG.from_dict(self.learned_network)
+        self.ctrl = storage.from_dict(self.learned_network)
         fb = self.source.fb
         self.fade.u = self.fade.weight = 0.0
         limits = self.cmd.limits

@@ -15,6 +15,7 @@ import yaml
 from cpg_walker.cpg.network import CPGParams
 from cpg_walker.errors import InputError
 from cpg_walker.paths import config_path, ros_parameters
+from cpg_walker.walker import storage
 from cpg_walker.walker.controller import HumanoidCPG, HumanoidSettings
 
 LEARNING_CONFIG = "cpg_humanoid_learning.yaml"
@@ -73,7 +74,7 @@ def load_controller(cpg_file: str | Path | None,
     requested ``n_oscillators`` is an error."""
     if cpg_file:
         path = resolve_cpg_file(cpg_file)
-        ctrl = HumanoidCPG.load(path)  # ValueError naming the file and the bad field if corrupt
+        ctrl = storage.load(path)  # ValueError naming the file and the bad field if corrupt
         if n_oscillators is not None and ctrl.net.N != n_oscillators:
             raise InputError(f"{path} has {ctrl.net.N} oscillators per DOF, {n_oscillators} were asked for")
         return ctrl, str(path), bool(ctrl.meta.get("learning", {}).get("converged", True))

@@ -1,6 +1,6 @@
 """``ros2 param`` / ``ros2 topic``-like tools for a pip-only install (no ros2cli): the core of
-``cpg-walker param`` and ``cpg-walker topic`` (node listing/info and topic info: rostools_graph.py;
-``topic pub``: rostools_pub.py).
+``cpg-walker param`` and ``cpg-walker topic`` (node listing/info and topic info: ros2cli_graph.py;
+``topic pub``: ros2cli_pub.py).
 
 Everything goes through the real ROS graph: the nodes' parameter services (rcl_interfaces
 ListParameters / GetParameters / SetParameters) and subscriptions to the topics, with the message types
@@ -9,7 +9,6 @@ discovered from the graph. The DDS domain is the environment's ``ROS_DOMAIN_ID``
 
 from __future__ import annotations
 
-import importlib
 import math
 import os
 import statistics
@@ -18,16 +17,13 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from cpg_walker.errors import InputError
-
-
-class ToolError(RuntimeError):
-    """A run-time failure the user can act on (node or topic not found, a rejected value): one line."""
+from cpg_walker.errors import InputError, ToolError
+from cpg_walker.nodes.messages import message_class
 
 
 def domain_id() -> int:
     """The DDS domain the tools join: ``ROS_DOMAIN_ID`` or 0."""
-    from cpg_walker.nodes.graph import env_domain_id
+    from cpg_walker.graph.processes import env_domain_id
 
     domain = env_domain_id()
     return 0 if domain is None else domain
@@ -283,20 +279,6 @@ def describe_value(v: Any) -> str:
 
 
 # ----------------------------------------------------------------------------------------------- topics
-
-def message_class(type_name: str) -> type:
-    """``sensor_msgs/msg/JointState`` (or ``sensor_msgs/JointState``, as ros2 accepts) -> the generated
-    Python class."""
-    parts = type_name.split("/")
-    if len(parts) == 2:
-        parts.insert(1, "msg")
-    if len(parts) != 3 or not all(parts):
-        raise InputError(f"not a message type: {type_name!r} (expected pkg/msg/Type)")
-    try:
-        return getattr(importlib.import_module(f"{parts[0]}.{parts[1]}"), parts[2])
-    except (ImportError, AttributeError) as exc:
-        raise ToolError(f"message type {type_name} is not installed in this Python ({exc})") from None
-
 
 def topic_types(s: Session, settle: float = 0.5, timeout: float = 3.0) -> dict[str, list[str]]:
     """Topic -> types as discovered from the graph: waits until the list is unchanged for ``settle``

@@ -8,7 +8,7 @@ files pass it) and overrides; stopped with SIGINT, then SIGKILL.
         g.wait("sim_node", timeout=60)
 
 A node can be placed elsewhere (``Placement``): its command line run under a prefix (e.g. ``ip netns exec
-NS``, nodes/netns.py) with environment overrides (e.g. its discovery peers).
+NS``, graph/netns.py) with environment overrides (e.g. its discovery peers).
 
 Used by ``cpg-walker replay --graph``, ``cpg-walker walk``, ``cpg-walker two-hosts``, the benchmark and
 the multi-process tests.

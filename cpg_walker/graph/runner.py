@@ -1,6 +1,6 @@
-"""The node graph in the foreground (``cpg-walker graph``): start it with ``cpg_walker.nodes.graph.Graph``,
-stream the nodes' log lines with a prefix, stop everything on Ctrl-C / SIGTERM / SIGHUP or when a node
-(normally the sim, at the end of ``duration``) exits."""
+"""The node graph in the foreground (``cpg-walker graph``): start it with
+``cpg_walker.graph.processes.Graph``, stream the nodes' log lines with a prefix, stop everything on Ctrl-C /
+SIGTERM / SIGHUP or when a node (normally the sim, at the end of ``duration``) exits."""
 
 from __future__ import annotations
 
@@ -105,7 +105,7 @@ def fall_of(record_path: Path) -> tuple[float | None, list | None] | None:
 
 def resolve_domain(domain_id: int | None) -> tuple[int, str]:
     """(domain, where it came from): the option, else ROS_DOMAIN_ID, else a free one."""
-    from cpg_walker.nodes.graph import check_domain_id, env_domain_id, quiet_domain_id
+    from cpg_walker.graph.processes import check_domain_id, env_domain_id, quiet_domain_id
 
     if domain_id is not None:
         return check_domain_id(domain_id, "--domain-id"), "--domain-id"
@@ -202,7 +202,7 @@ def run_foreground(spec: GraphSpec, out: TextIO = sys.stdout) -> tuple[int, tupl
     """Run the graph until the sim ends (or a node fails, or a signal). Returns (status, fall): status 0
     when the sim ended by itself with status 0 (or a signal stopped everything), else the failing node's;
     fall: ``fall_of`` sim_node's run record."""
-    from cpg_walker.nodes.graph import Graph
+    from cpg_walker.graph.processes import Graph
 
     params = spec.node_params()
     domain, how = resolve_domain(spec.domain_id)

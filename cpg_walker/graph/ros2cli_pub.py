@@ -10,8 +10,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from cpg_walker.errors import InputError
-from cpg_walker.nodes.rostools import Session, ToolError, message_class, node_name
+from cpg_walker.errors import InputError, ToolError
+from cpg_walker.graph.ros2cli import Session, node_name
+from cpg_walker.nodes.messages import message_class
 
 FLOAT_TYPES = {"float", "double", "float32", "float64", "long double"}
 #: Integer field types -> their range (rclpy's generated setters check nothing unless asked to).

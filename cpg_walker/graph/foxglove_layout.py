@@ -1,7 +1,7 @@
 """The Foxglove layout of the live view (docs/foxglove_layout.json), built with foxglove-sdk's layout types
 so it follows the app's layout format: regenerate it with
 
-    python -m cpg_walker.nodes.foxglove_layout > docs/foxglove_layout.json
+    python -m cpg_walker.graph.foxglove_layout > docs/foxglove_layout.json
 
 (test/test_foxglove.py fails when the shipped file differs from a fresh generation). Panels: the 3D view
 (the URDF from /robot_description posed by /tf, following base_link), the CPG phases and amplitudes of the

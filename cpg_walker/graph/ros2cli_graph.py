@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from cpg_walker.nodes.rostools import Session, ToolError, node_name
+from cpg_walker.errors import ToolError
+from cpg_walker.graph.ros2cli import Session, node_name
 
 HIDDEN_PREFIX = "_"  # rclpy's HIDDEN_NODE_PREFIX: hidden nodes, topics and services
 
