@@ -27,14 +27,16 @@ from pathlib import Path
 
 import pytest
 
+from cpg_walker.nodes import interface as ifc
+
 REPO = Path(__file__).resolve().parent.parent
 DOCS = ("README.md", "docs/ROS_INTERFACE.md", "docs/DEPLOYMENT.md")
 
 #: Names the docs rightly use that are no topic, service or node of ours (prefix match at a '/').
 ALLOWED = {
-    "/tf": "robot_state_publisher's (walk.launch.py); sim_node creates it only where tf2_msgs imports (not "
+    ifc.TF: "robot_state_publisher's (walk.launch.py); sim_node creates it only where tf2_msgs imports (not "
            "on PyPI); the recorder writes it into bags",
-    "/tf_static": "robot_state_publisher's; the recorder writes it into bags",
+    ifc.TF_STATIC: "robot_state_publisher's; the recorder writes it into bags",
     "/rosout": "rcl's logging publisher of every node, not among rclpy's Node.publishers",
     "/nonexistent": "the absent node of an error example",
     "/x": "placeholder in a quoted error message",
@@ -42,7 +44,7 @@ ALLOWED = {
     "/cpg_walker": "SROS2 enclave names (--enclave /cpg_walker/sim)",
 }
 #: Topics that every node has and no doc table has to list.
-INFRA = {"/parameter_events", "/rosout"}
+INFRA = {ifc.PARAMETER_EVENTS, ifc.ROSOUT}
 
 #: First components of filesystem paths (/tmp/..., /path/to/python3): no topics.
 FS_ROOTS = {"dev", "proc", "sys", "tmp", "opt", "usr", "etc", "home", "lib", "work", "var", "root", "mnt",
@@ -95,7 +97,7 @@ class Doc:
 
     def section_node(self, offset: int) -> str | None:
         """The node whose `## <exe> ...` section holds ``offset`` (sub-sections included)."""
-        from cpg_walker.nodes.runtime import NODE_NAMES
+        from cpg_walker.nodes.interface import NODE_NAMES
 
         heads = [name for start, name in self.heads if start <= offset]
         return NODE_NAMES.get(heads[-1]) if heads else None
@@ -161,7 +163,7 @@ def outside_parens(text: str, offset: int, before_colon: bool = False) -> list[t
 
 
 def param_mentions(doc: Doc) -> list[Mention]:
-    from cpg_walker.nodes.runtime import NODE_NAMES
+    from cpg_walker.nodes.interface import NODE_NAMES
 
     found: list[tuple[int, str, str | None]] = []  # (offset, name, node)
 
@@ -412,7 +414,7 @@ def _topics(cell: str) -> set[str]:
 def test_readme_node_table_lists_each_nodes_topics(real):
     """Row by row, both ways: what a node subscribes and publishes, no more, no less; a row for every node
     (foxglove_node's Foxglove channels are not ROS topics)."""
-    from cpg_walker.nodes.runtime import NODE_NAMES
+    from cpg_walker.nodes.interface import NODE_NAMES
 
     doc = read_docs()[0]
     table = re.search(r"^\| node \| subscribes \| publishes \|\n\|[-|]+\|\n((?:\|.*\n)+)", doc.prose, re.M)

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 from cpg_walker.nodes.graph import NODES
+from cpg_walker.nodes.interface import NODE_NAMES
 from cpg_walker.nodes.rostools import from_parameter_value
-from cpg_walker.nodes.runtime import NODE_NAMES, params_file
+from cpg_walker.nodes.runtime import params_file
 from cpg_walker.paths import ros_parameters
 from cpg_walker.robot.joints import JOINT_NAMES
 from cpg_walker.robot.urdf import read_urdf

@@ -77,7 +77,8 @@ def main() -> int:
     # and robot_state_publisher) and the RViz view
     expect += [py_site / PKG / "robot" / "hoap2.urdf", prefix / "share" / PKG / "urdf" / "hoap2.urdf"]
     expect += [prefix / "share" / PKG / "rviz" / p.name for p in sorted((REPO / "rviz").glob("*.rviz"))]
-    expect += [py_site / PKG / "robot" / "data" / p.name for p in sorted((REPO / PKG / "robot" / "data").glob("*"))]
+    expect += [py_site / PKG / "robot" / "data" / p.name
+               for p in sorted((REPO / PKG / "robot" / "data").glob("*"))]
     problems += [f"missing {p.relative_to(work)}" for p in expect if not p.exists()]
     urdfs = [prefix / "share" / PKG / "urdf" / "hoap2.urdf", py_site / PKG / "robot" / "hoap2.urdf"]
     if all(p.exists() for p in urdfs) and urdfs[0].read_bytes() != urdfs[1].read_bytes():
@@ -97,7 +98,8 @@ def main() -> int:
             env=env, capture_output=True, text=True,
         )
         if lookup.returncode != 0:
-            problems.append(f"ros2 run lookup failed for {exe}: {lookup.stdout.strip()} {lookup.stderr.strip()}")
+            problems.append(f"ros2 run lookup failed for {exe}: {lookup.stdout.strip()} "
+                            f"{lookup.stderr.strip()}")
             continue
         path = lookup.stdout.strip()
         started = subprocess.run([path, "--help"], env=env, capture_output=True, text=True, timeout=60)

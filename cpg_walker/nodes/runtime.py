@@ -10,13 +10,12 @@ from typing import TYPE_CHECKING
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
+from cpg_walker.nodes.interface import NODE_NAMES, PACINGS  # noqa: F401 (also imported from here)
 from cpg_walker.paths import config_path
 
 if TYPE_CHECKING:  # rclpy itself is imported where it is used: the CLI imports PACINGS from here
     from rclpy.node import Node
 
-#: sim_node's pacings: wall-clock schedule, as fast as possible, or one period per controller answer.
-PACINGS = ("realtime", "fast", "lockstep")
 #: Sim s a /clock or state stamp may lie before the newest one seen before a node takes it for a restarted
 #: (reset) sim and starts its own state over (docs/ROS_INTERFACE.md, "Faults"); smaller steps back are
 #: stale or re-sent messages.
@@ -58,9 +57,6 @@ class StampGuard:
             return self.TAKE if ahead else self.RESET
         self.dropped += 1
         return self.DROP
-#: Each node executable's ROS node name; its parameters are config/<node name>.yaml (``params_file``).
-NODE_NAMES = {"sim_node": "sim", "pid_node": "pid", "target_player_node": "target_player", "cpg_node": "cpg",
-              "recorder_node": "recorder", "foxglove_node": "foxglove", "relay_node": "relay"}
 
 
 def parse_cli(prog: str, description: str, interface: str, argv: list[str] | None = None) -> list[str]:
@@ -227,20 +223,21 @@ class GcPauses:
 
 
 def declare_scheduling(node: Node) -> dict:
-    """Declare the OS scheduling parameters of a control node (values in its parameters file):
-    ``realtime_priority`` (SCHED_FIFO priority 1-99; 0 = none), ``nice`` (used when no real-time
-    priority is set or allowed; 0 = leave) and ``cpu_affinity`` (a taskset-style bit mask; 0 = any CPU).
-    Returns them (the mask as CPU numbers); ``apply_scheduling`` acts on them once the node has started."""
-    prio = declare(node, "realtime_priority", int_param(
-        "SCHED_FIFO priority (1-99) of the node's loop and middleware threads once started; 0 = normal "
-        "scheduling. Needs root or CAP_SYS_NICE, else the nice value is tried", 0, 99, read_only=True))
-    nice = declare(node, "nice", int_param(
-        "niceness (-20..19) when no real-time priority is set or permitted; 0 = leave as started", -20, 19,
-        read_only=True))
-    mask = declare(node, "cpu_affinity", int_param(
-        "CPUs the node's threads may run on, as a bit mask like taskset's (1 = CPU 0, 2 = CPU 1, 3 = both); "
-        "0 = any", 0, 2**63 - 1, read_only=True))
-    return {"realtime_priority": int(prio), "nice": int(nice), "cpu_affinity": cpus_of_mask(int(mask))}
+    """Declare the OS scheduling parameters of a control node (values in its parameters file; specs:
+    params.SCHEDULING): ``realtime_priority`` (SCHED_FIFO priority 1-99; 0 = none), ``nice`` (used when no
+    real-time priority is set or allowed; 0 = leave) and ``cpu_affinity`` (a taskset-style bit mask; 0 =
+    any CPU). Returns them as ``scheduling_request`` does; ``apply_scheduling`` acts on them once the node
+    has started."""
+    from cpg_walker.nodes.params import SCHEDULING, declare_params
+
+    return scheduling_request(declare_params(node, SCHEDULING))
+
+
+def scheduling_request(values: dict) -> dict:
+    """The scheduling parameters among declared ``values`` as ``apply_scheduling`` takes them (the mask as
+    CPU numbers)."""
+    return {"realtime_priority": int(values["realtime_priority"]), "nice": int(values["nice"]),
+            "cpu_affinity": cpus_of_mask(int(values["cpu_affinity"]))}
 
 
 def cpus_of_mask(mask: int) -> list[int]:
