@@ -264,6 +264,7 @@ class Real:
     services: set[str]
     params: dict[str, set[str]]
     channels: set[str]  # foxglove_node's channels (Foxglove topics, not ROS)
+    specs: dict[str, tuple] = field(default_factory=dict)  # node name -> its declared parameters (ParamSpec)
 
     def names(self) -> set[str]:
         """Every topic, service, node and namespace of ours, and the Foxglove channels."""
@@ -306,6 +307,7 @@ def _build() -> Real:
     from cpg_walker.nodes.graph import random_domain_id
     from cpg_walker.nodes.pid_node import PidNode
     from cpg_walker.nodes.recorder_node import RecorderNode
+    from cpg_walker.nodes.reference import declared_specs
     from cpg_walker.nodes.relay_node import RelayNode
     from cpg_walker.nodes.runtime import params_file
     from cpg_walker.nodes.target_player_node import TargetPlayerNode
@@ -332,6 +334,7 @@ def _build() -> Real:
                     real.services |= {"/" + (s.srv_name.replace("~", n) if s.srv_name.startswith("~")
                                              else s.srv_name).lstrip("/") for s in node.services}
                     real.params[n] = set(node._parameters)
+                    real.specs[n] = declared_specs(node)
                     taker = getattr(node, "taker", None)  # foxglove_node's hidden subscriber node
                     if taker is not None:
                         real.subs[n] |= {s.topic_name for s in taker.subscriptions}

@@ -158,6 +158,8 @@ class NodeInterface:
     publishes: tuple[str, ...] = ()
     services: tuple[str, ...] = ()
     note: str = ""
+    #: Topics chosen at run time (by parameters, or found in the graph) besides the listed ones.
+    runtime_topics: bool = False
 
     @property
     def name(self) -> str:
@@ -173,7 +175,8 @@ INTERFACES = {i.executable: i for i in (
                   note="/robot_description only with publish_description; /tf only where tf2_msgs imports."),
     NodeInterface(PID_NODE, "the HOAP-2 joint servos: answers each state with torques",
                   subscribes=(JOINT_TARGETS, JOINT_STATES, JOINT_TRAJECTORY), publishes=(JOINT_TORQUES,),
-                  note="/joint_trajectory is not subscribed in lockstep."),
+                  note="/joint_trajectory is not subscribed in lockstep. Per-joint gains (`kp.<joint>` ...) "
+                       "given at start-up are declared beside the group gains, with the same ranges."),
     NodeInterface(CPG_NODE, "the learned CPG: joint targets from the oscillators, on /clock",
                   subscribes=(CLOCK, IMU, *FOOT_LOADS, CMD_VEL, SIM_SERVO_HOLD),
                   publishes=(DIAGNOSTICS, CPG_STATE, JOINT_TARGETS, JOINT_TRAJECTORY)),
@@ -181,7 +184,8 @@ INTERFACES = {i.executable: i for i in (
                   subscribes=(CLOCK,), publishes=(JOINT_TARGETS,)),
     NodeInterface(RECORDER_NODE, "records every topic of the graph to one rosbag2 MCAP",
                   note="Subscribes to every topic that has a publisher (found by scanning the graph, the "
-                       "publishers' QoS); writes /tf and /tf_static into the bag on stop."),
+                       "publishers' QoS); writes /tf and /tf_static into the bag on stop.",
+                  runtime_topics=True),
     NodeInterface(FOXGLOVE_NODE, "a live view of the walking robot in Foxglove (WebSocket server)",
                   subscribes=(JOINT_STATES, JOINT_TARGETS, ODOM_GROUND_TRUTH, *FOOT_LOADS, CPG_STATE,
                               DIAGNOSTICS, PARAMETER_EVENTS),
@@ -190,5 +194,6 @@ INTERFACES = {i.executable: i for i in (
                        "of the forwarded parameters' nodes."),
     NodeInterface(RELAY_NODE, "a degraded link between remapped topics, for fault injection",
                   publishes=(DIAGNOSTICS,),
-                  note="Subscribes to each of `topics` (raw) and publishes it again on `prefix` + topic."),
+                  note="Subscribes to each of `topics` (raw) and publishes it again on `prefix` + topic.",
+                  runtime_topics=True),
 )}
