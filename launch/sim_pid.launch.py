@@ -14,6 +14,7 @@ from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
 
+from cpg_walker.nodes.interface import NODE_NAMES, PID_NODE, PLAYER_NODE, SIM_NODE, controllers_lockstep
 from launch import LaunchDescription
 
 
@@ -32,20 +33,21 @@ def nodes(context) -> list:
     """sim + pid (+ the player), each with its file, then the given launch arguments as overrides."""
     names = ("pacing", "control_period", "player", "gait")
     arg = {k: context.launch_configurations.get(k, "") for k in names}
-    pacing = arg["pacing"] or file_value("sim", "pacing")
+    pacing = arg["pacing"] or file_value(NODE_NAMES[SIM_NODE], "pacing")
     player = arg["player"].lower() == "true"
     sim = {"use_sim_time": True, "pacing": pacing,
            **({"control_period": float(arg["control_period"])} if arg["control_period"] else {})}
     out = [
-        Node(package="cpg_walker", executable="sim_node", name="sim", output="screen",
-             parameters=[params("sim"), sim]),
-        Node(package="cpg_walker", executable="pid_node", name="pid", output="screen",
-             parameters=[params("pid"), {"use_sim_time": True, "lockstep": pacing == "lockstep",
-                                         "wait_for_targets": player}]),
+        Node(package="cpg_walker", executable=SIM_NODE, name=NODE_NAMES[SIM_NODE], output="screen",
+             parameters=[params(NODE_NAMES[SIM_NODE]), sim]),
+        Node(package="cpg_walker", executable=PID_NODE, name=NODE_NAMES[PID_NODE], output="screen",
+             parameters=[params(NODE_NAMES[PID_NODE]), {"use_sim_time": True,
+                                                        "lockstep": controllers_lockstep(pacing),
+                                                        "wait_for_targets": player}]),
     ]
     if player:
-        out.append(Node(package="cpg_walker", executable="target_player_node", name="target_player",
-                        output="screen", parameters=[params("target_player"), {
+        out.append(Node(package="cpg_walker", executable=PLAYER_NODE, name=NODE_NAMES[PLAYER_NODE],
+                        output="screen", parameters=[params(NODE_NAMES[PLAYER_NODE]), {
                             "use_sim_time": True, **({"gait": arg["gait"]} if arg["gait"] else {})}]))
     return out
 

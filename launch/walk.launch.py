@@ -18,6 +18,7 @@ from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction
 from launch_ros.actions import Node
 
+from cpg_walker.nodes.interface import CPG_NODE, NODE_NAMES, PID_NODE, SIM_NODE, controllers_lockstep
 from launch import LaunchDescription
 
 PACKAGE = "cpg_walker"
@@ -64,9 +65,9 @@ def nodes(context) -> list:
     """The nodes (each of ours with its file, then the given launch arguments as overrides) and the
     recorder."""
     arg = {name: context.launch_configurations.get(name, "") for name in ARGUMENTS}
-    pacing = arg["pacing"] or file_value("sim", "pacing")
+    pacing = arg["pacing"] or file_value(NODE_NAMES[SIM_NODE], "pacing")
     feedback = flag("feedback", arg["feedback"])
-    cpg = {"use_sim_time": True, "lockstep": pacing == "lockstep",
+    cpg = {"use_sim_time": True, "lockstep": controllers_lockstep(pacing),
            **{k: float(arg[k]) for k in ("zeta", "alpha") if arg[k]},
            **({} if feedback is None else {"feedback": feedback})}
     record = flag("record", arg["record"])
@@ -75,14 +76,15 @@ def nodes(context) -> list:
     with open(share("urdf", "hoap2.urdf"), encoding="utf-8") as fh:
         description = fh.read()
     out = [
-        Node(package=PACKAGE, executable="sim_node", name="sim", output="screen",
-             parameters=[params("sim"), {"use_sim_time": True, "pacing": pacing,
-                                         "publish_description": False, **waits}]),
-        Node(package=PACKAGE, executable="pid_node", name="pid", output="screen",
-             parameters=[params("pid"), {"use_sim_time": True, "lockstep": pacing == "lockstep",
-                                         "wait_for_targets": True}]),
-        Node(package=PACKAGE, executable="cpg_node", name="cpg", output="screen",
-             parameters=[params("cpg"), cpg]),
+        Node(package=PACKAGE, executable=SIM_NODE, name=NODE_NAMES[SIM_NODE], output="screen",
+             parameters=[params(NODE_NAMES[SIM_NODE]), {"use_sim_time": True, "pacing": pacing,
+                                                        "publish_description": False, **waits}]),
+        Node(package=PACKAGE, executable=PID_NODE, name=NODE_NAMES[PID_NODE], output="screen",
+             parameters=[params(NODE_NAMES[PID_NODE]), {"use_sim_time": True,
+                                                        "lockstep": controllers_lockstep(pacing),
+                                                        "wait_for_targets": True}]),
+        Node(package=PACKAGE, executable=CPG_NODE, name=NODE_NAMES[CPG_NODE], output="screen",
+             parameters=[params(NODE_NAMES[CPG_NODE]), cpg]),
         Node(package="robot_state_publisher", executable="robot_state_publisher",
              name="robot_state_publisher", output="screen",
              parameters=[{"robot_description": description, "use_sim_time": True}]),

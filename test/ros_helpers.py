@@ -22,6 +22,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO
 
+from cpg_walker.nodes import interface as ifc
+
 #: Wall s for node processes to start and be discovered (imports, numba, DDS discovery): took up to ~25 s
 #: on the 2-core machine with two suites and other jobs running beside (see README, "Tests under load").
 START_S = 180.0
@@ -241,7 +243,7 @@ class SimWatchdog:
                 self.messages += 1
                 self.sim_time = stamp_ns(msg) / 1e9
 
-            probe.node.create_subscription(DiagnosticArray, "/diagnostics", seen, 10)
+            probe.node.create_subscription(DiagnosticArray, ifc.DIAGNOSTICS, seen, 10)
             last, count = time.monotonic(), -1
             while not self._stop.is_set():
                 probe.executor.spin_once(timeout_sec=0.1)

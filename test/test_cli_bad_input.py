@@ -19,6 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from cpg_walker.cli.main import build_parser, main
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
 FUZZ = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -131,10 +132,10 @@ NUMBERS = [
     (["node", "info", "/cpg"], "--timeout", negative),
     (["param", "list", "/cpg"], "--timeout", negative),
     (["topic", "list"], "--wait", negative),
-    (["topic", "echo", "/clock"], "--count", lambda: ints_below(1)),
-    (["topic", "echo", "/clock"], "--timeout", negative),
-    (["topic", "hz", "/clock"], "--window", lambda: ints_below(2)),
-    (["topic", "hz", "/clock"], "--duration", not_positive),
+    (["topic", "echo", ifc.CLOCK], "--count", lambda: ints_below(1)),
+    (["topic", "echo", ifc.CLOCK], "--timeout", negative),
+    (["topic", "hz", ifc.CLOCK], "--window", lambda: ints_below(2)),
+    (["topic", "hz", ifc.CLOCK], "--duration", not_positive),
     (["topic", "pub", "/x", "std_msgs/msg/Empty"], "--rate", not_positive),
     (["topic", "pub", "/x", "std_msgs/msg/Empty"], "--qos-depth", lambda: ints_below(0)),
 ]

@@ -23,6 +23,7 @@ from cpg_walker.experiments.demo import (
     segments,
     walk_start_s,
 )
+from cpg_walker.nodes import interface as ifc
 
 NS = SimpleNamespace  # a message's fields
 #: Sim s of the end-to-end run: the recorded opening steps (~6.6 s), walking forward, the "faster" segment
@@ -120,14 +121,14 @@ def _check_outputs(out, summary: dict) -> None:
     assert {"targets_vs_states.png", "modulation.png"} <= set(files)
     for name in files:
         assert (out / name).stat().st_size > 0, name
-    topics = read_topics(out / "recording.mcap", ["/joint_states", "/imu", "/tf", "/robot_description",
-                                                  "/joint_targets", "/odom/ground_truth"])
+    topics = read_topics(out / "recording.mcap", [ifc.JOINT_STATES, ifc.IMU, ifc.TF, ifc.ROBOT_DESCRIPTION,
+                                                  ifc.JOINT_TARGETS, ifc.ODOM_GROUND_TRUTH])
     sim_s = summary["duration_s"]
-    assert len(topics["/robot_description"]) == 1
-    assert len(topics["/odom/ground_truth"]) >= 0.9 * sim_s / 0.01  # odom_period 0.01 sim s
-    for name in ("/joint_states", "/imu", "/joint_targets"):  # every 0.002 sim s control period
+    assert len(topics[ifc.ROBOT_DESCRIPTION]) == 1
+    assert len(topics[ifc.ODOM_GROUND_TRUTH]) >= 0.9 * sim_s / 0.01  # odom_period 0.01 sim s
+    for name in (ifc.JOINT_STATES, ifc.IMU, ifc.JOINT_TARGETS):  # every 0.002 sim s control period
         assert len(topics[name]) >= 0.9 * sim_s / 0.002, name
-    assert len(topics["/tf"]) >= 0.9 * len(topics["/odom/ground_truth"])
+    assert len(topics[ifc.TF]) >= 0.9 * len(topics[ifc.ODOM_GROUND_TRUTH])
     import imageio.v2 as imageio
 
     with imageio.get_reader(out / "walk.mp4") as video:
@@ -183,8 +184,8 @@ def test_sigint_stops_every_node_and_still_writes_the_outputs(tmp_path, ros_doma
     p = _demo(out, ros_domain, 40.0)
     probe = Probe(ros_domain)
     try:
-        probe.listen("/clock", Clock, 1)
-        sim_s = lambda: probe.received["/clock"][-1][1].clock.sec if probe.received["/clock"] else 0  # noqa: E731
+        probe.listen(ifc.CLOCK, Clock, 1)
+        sim_s = lambda: probe.received[ifc.CLOCK][-1][1].clock.sec if probe.received[ifc.CLOCK] else 0  # noqa: E731
         probe.wait(lambda: sim_s() >= 3, "the demo's sim to reach 3 s", sim_deadline(3.0))
     finally:
         probe.close()

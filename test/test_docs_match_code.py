@@ -27,14 +27,16 @@ from pathlib import Path
 
 import pytest
 
+from cpg_walker.nodes import interface as ifc
+
 REPO = Path(__file__).resolve().parent.parent
 DOCS = ("README.md", "docs/ROS_INTERFACE.md", "docs/DEPLOYMENT.md")
 
 #: Names the docs rightly use that are no topic, service or node of ours (prefix match at a '/').
 ALLOWED = {
-    "/tf": "robot_state_publisher's (walk.launch.py); sim_node creates it only where tf2_msgs imports (not "
+    ifc.TF: "robot_state_publisher's (walk.launch.py); sim_node creates it only where tf2_msgs imports (not "
            "on PyPI); the recorder writes it into bags",
-    "/tf_static": "robot_state_publisher's; the recorder writes it into bags",
+    ifc.TF_STATIC: "robot_state_publisher's; the recorder writes it into bags",
     "/rosout": "rcl's logging publisher of every node, not among rclpy's Node.publishers",
     "/nonexistent": "the absent node of an error example",
     "/x": "placeholder in a quoted error message",
@@ -42,7 +44,7 @@ ALLOWED = {
     "/cpg_walker": "SROS2 enclave names (--enclave /cpg_walker/sim)",
 }
 #: Topics that every node has and no doc table has to list.
-INFRA = {"/parameter_events", "/rosout"}
+INFRA = {ifc.PARAMETER_EVENTS, ifc.ROSOUT}
 
 #: First components of filesystem paths (/tmp/..., /path/to/python3): no topics.
 FS_ROOTS = {"dev", "proc", "sys", "tmp", "opt", "usr", "etc", "home", "lib", "work", "var", "root", "mnt",
@@ -95,7 +97,7 @@ class Doc:
 
     def section_node(self, offset: int) -> str | None:
         """The node whose `## <exe> ...` section holds ``offset`` (sub-sections included)."""
-        from cpg_walker.nodes.runtime import NODE_NAMES
+        from cpg_walker.nodes.interface import NODE_NAMES
 
         heads = [name for start, name in self.heads if start <= offset]
         return NODE_NAMES.get(heads[-1]) if heads else None
@@ -161,7 +163,7 @@ def outside_parens(text: str, offset: int, before_colon: bool = False) -> list[t
 
 
 def param_mentions(doc: Doc) -> list[Mention]:
-    from cpg_walker.nodes.runtime import NODE_NAMES
+    from cpg_walker.nodes.interface import NODE_NAMES
 
     found: list[tuple[int, str, str | None]] = []  # (offset, name, node)
 
@@ -262,6 +264,7 @@ class Real:
     services: set[str]
     params: dict[str, set[str]]
     channels: set[str]  # foxglove_node's channels (Foxglove topics, not ROS)
+    specs: dict[str, tuple] = field(default_factory=dict)  # node name -> its declared parameters (ParamSpec)
 
     def names(self) -> set[str]:
         """Every topic, service, node and namespace of ours, and the Foxglove channels."""
@@ -300,12 +303,13 @@ def _build() -> Real:
 
     import cpg_walker.nodes.sim_node as sim_module
     from cpg_walker.graph.processes import random_domain_id
+    from cpg_walker.graph.reference import declared_specs
     from cpg_walker.nodes.cpg_node import CPGNode
     from cpg_walker.nodes.foxglove_node import FoxgloveNode
+    from cpg_walker.nodes.params import params_file
     from cpg_walker.nodes.pid_node import PidNode
     from cpg_walker.nodes.recorder_node import RecorderNode
     from cpg_walker.nodes.relay_node import RelayNode
-    from cpg_walker.nodes.runtime import params_file
     from cpg_walker.nodes.target_player_node import TargetPlayerNode
 
     ctx = rclpy.Context()
@@ -330,6 +334,7 @@ def _build() -> Real:
                     real.services |= {"/" + (s.srv_name.replace("~", n) if s.srv_name.startswith("~")
                                              else s.srv_name).lstrip("/") for s in node.services}
                     real.params[n] = set(node._parameters)
+                    real.specs[n] = declared_specs(node)
                     taker = getattr(node, "taker", None)  # foxglove_node's hidden subscriber node
                     if taker is not None:
                         real.subs[n] |= {s.topic_name for s in taker.subscriptions}
@@ -412,7 +417,7 @@ def _topics(cell: str) -> set[str]:
 def test_readme_node_table_lists_each_nodes_topics(real):
     """Row by row, both ways: what a node subscribes and publishes, no more, no less; a row for every node
     (foxglove_node's Foxglove channels are not ROS topics)."""
-    from cpg_walker.nodes.runtime import NODE_NAMES
+    from cpg_walker.nodes.interface import NODE_NAMES
 
     doc = read_docs()[0]
     table = re.search(r"^\| node \| subscribes \| publishes \|\n\|[-|]+\|\n((?:\|.*\n)+)", doc.prose, re.M)

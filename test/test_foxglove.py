@@ -17,6 +17,7 @@ import time
 import pytest
 from ros_helpers import START_S
 
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.nodes.foxglove_view import READY, SUBPROTOCOL, parse_address
 from cpg_walker.robot.joints import JOINT_NAMES
 from cpg_walker.walker.controller import DOFS
@@ -160,10 +161,10 @@ class Client:
         return {p["name"]: p["value"] for p in answer["parameters"]}
 
 
-CHANNELS = {"/tf": "foxglove.FrameTransforms", "/joint_states": "foxglove.JointStates",
-            "/joint_targets": "foxglove.JointStates", "/cpg/state": "cpg_walker.CpgState",
-            "/contact": "cpg_walker.Contact", "/contact/touchdown": "cpg_walker.Touchdown",
-            "/diagnostics": "cpg_walker.Diagnostics", "/robot_description": "std_msgs/msg/String"}
+CHANNELS = {ifc.TF: "foxglove.FrameTransforms", ifc.JOINT_STATES: "foxglove.JointStates",
+            ifc.JOINT_TARGETS: "foxglove.JointStates", ifc.CPG_STATE: "cpg_walker.CpgState",
+            ifc.CONTACT: "cpg_walker.Contact", ifc.CONTACT_TOUCHDOWN: "cpg_walker.Touchdown",
+            ifc.DIAGNOSTICS: "cpg_walker.Diagnostics", ifc.ROBOT_DESCRIPTION: "std_msgs/msg/String"}
 
 
 @pytest.mark.ros
@@ -186,31 +187,32 @@ def test_foxglove_client_sees_the_robot_and_sets_zeta(graph, probe) -> None:
         client.pump(lambda: set(CHANNELS) <= set(client.channels), f"channels {sorted(CHANNELS)}")
         assert {t: client.channels[t]["schemaName"] for t in CHANNELS} == CHANNELS
 
-        wanted = ["/tf", "/joint_states", "/joint_targets", "/cpg/state", "/contact", "/robot_description"]
+        wanted = [ifc.TF, ifc.JOINT_STATES, ifc.JOINT_TARGETS, ifc.CPG_STATE, ifc.CONTACT,
+                  ifc.ROBOT_DESCRIPTION]
         client.subscribe(wanted)
         client.pump(lambda: all(client.data.get(t) for t in wanted),
                     f"a message on each of {wanted}")
 
-        tf = frame_transforms(client.data["/tf"][-1])
+        tf = frame_transforms(client.data[ifc.TF][-1])
         assert {"base_link", "l_sole", "r_sole", "imu"} <= set(tf), sorted(tf)
         assert tf["base_link"]["parent"] == "odom"
         assert 0.1 < tf["base_link"]["translation"][2] < 0.5, tf["base_link"]  # the torso above the floor
         assert all(abs(math.hypot(*t["rotation"]) - 1.0) < 1e-6 for t in tf.values())
 
-        for topic in ("/joint_states", "/joint_targets"):
+        for topic in (ifc.JOINT_STATES, ifc.JOINT_TARGETS):
             js = joint_states(client.data[topic][-1])
             assert set(js) == set(JOINT_NAMES), topic
             assert all(math.isfinite(q) and abs(q) < math.pi for q, _ in js.values()), topic
 
-        state = json.loads(client.data["/cpg/state"][-1])
+        state = json.loads(client.data[ifc.CPG_STATE][-1])
         assert list(state["dofs"]) == list(DOFS)
         for dof in state["dofs"].values():
             assert dof["phase_rad"] and all(0 <= p < 2 * math.pi for p in dof["phase_rad"])
             assert all(a >= 0 for a in dof["amplitude_rad"]) and all(f > 0 for f in dof["frequency_hz"])
 
-        contact = json.loads(client.data["/contact"][-1])
+        contact = json.loads(client.data[ifc.CONTACT][-1])
         assert contact["left_load_n"] + contact["right_load_n"] > 0  # the weight is on the soles
-        assert "<robot" in json.loads(client.data["/robot_description"][-1])["data"]
+        assert "<robot" in json.loads(client.data[ifc.ROBOT_DESCRIPTION][-1])["data"]
 
         get = {"op": "getParameters", "parameterNames": ["/cpg.zeta", "/cpg.alpha"], "id": "g"}
         got = client.request(get, "parameterValues")
@@ -282,7 +284,7 @@ def test_the_bridge_takes_its_packaged_file_and_refuses_what_it_cannot_forward(g
 
     from ros_helpers import ANSWER_S
 
-    from cpg_walker.nodes.runtime import params_file
+    from cpg_walker.nodes.params import params_file
     from cpg_walker.paths import ros_parameters
 
     log = graph.log_dir / "foxglove_node.bare.log"
@@ -308,8 +310,8 @@ def test_the_bridge_takes_its_packaged_file_and_refuses_what_it_cannot_forward(g
 
         with connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], open_timeout=ANSWER_S) as ws:
             client = Client(ws)
-            assert client.set_param("/robot_description", "<robot/>", "ro")["/robot_description"].startswith(
-                "<?xml")
+            answer = client.set_param(ifc.ROBOT_DESCRIPTION, "<robot/>", "ro")
+            assert answer[ifc.ROBOT_DESCRIPTION].startswith("<?xml")
             assert client.set_param("/sim.pacing", "fast", "unknown") == {}
             assert client.set_param("/cpg.zeta", 0.5, "absent") == {}  # no cpg node: no value to give
             client.pump(lambda: sum(o["op"] == "status" for o in client.ops) >= 3, "three status messages")

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pytest
 
+from cpg_walker.nodes import interface as ifc
+
 REPO = Path(__file__).resolve().parent.parent
 PACKAGE = "cpg_walker"
 LAUNCH = sorted((REPO / "launch").glob("*.launch.py"))
@@ -58,11 +60,17 @@ def _calls(tree: ast.AST, name: str) -> list[ast.Call]:
             and (getattr(n.func, "id", None) == name or getattr(n.func, "attr", None) == name)]
 
 
-def _const(node: ast.AST, names: dict[str, str]) -> str:
+def _const(node: ast.AST, names: dict[str, str]):
+    """A constant, a module-level constant of the launch file, a name it imports from
+    cpg_walker.nodes.interface, or a subscript of one (``NODE_NAMES[SIM_NODE]``)."""
     if isinstance(node, ast.Constant):
         return node.value
     if isinstance(node, ast.Name) and node.id in names:
         return names[node.id]
+    if isinstance(node, ast.Name) and hasattr(ifc, node.id):
+        return getattr(ifc, node.id)
+    if isinstance(node, ast.Subscript):
+        return _const(node.value, names)[_const(node.slice, names)]
     raise AssertionError(f"not a constant: {ast.dump(node)}")
 
 
@@ -85,8 +93,9 @@ def test_launch_file_starts_installed_nodes_with_installed_files(path: Path) -> 
             assert node["package"] in deps, f"{path.name}: {node['package']} is not an exec_depend"
     # every parameters file (params("<node>")) and share file (share("dir", "file")) is installed
     for call in _calls(tree, "params"):
-        if call.args and isinstance(call.args[0], ast.Constant):
-            assert f"config/{call.args[0].value}.yaml" in share, call.args[0].value
+        if call.args and not isinstance(call.args[0], ast.Name | ast.Attribute):  # not a function's argument
+            name = _const(call.args[0], consts)
+            assert f"config/{name}.yaml" in share, name
     for call in _calls(tree, "share"):
         if all(isinstance(a, ast.Constant) for a in call.args) and len(call.args) == 2:
             assert "/".join(a.value for a in call.args) in share, [a.value for a in call.args]
@@ -117,7 +126,7 @@ def test_rviz_config_shows_the_robot_from_the_description_in_odom() -> None:
     displays = {d["Class"]: d for d in view["Displays"]}
     model = displays["rviz_default_plugins/RobotModel"]
     assert model["Description Source"] == "Topic"
-    assert model["Description Topic"]["Value"] == "/robot_description"
+    assert model["Description Topic"]["Value"] == ifc.ROBOT_DESCRIPTION
     assert model["Description Topic"]["Durability Policy"] == "Transient Local"
     assert "rviz_default_plugins/TF" in displays
 

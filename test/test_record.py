@@ -22,6 +22,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.nodes.recording import BAG_NAME, read_topics
 from cpg_walker.paths import ros_parameters
 
@@ -31,14 +32,14 @@ DURATION_S, ZETA_AT_S, ZETA_TO, SIDE_S = 2.0, 0.5, 0.8, 1.0
 START_TICKS = 10
 SIM = ros_parameters("sim.yaml", "sim")
 TYPES = {
-    "/clock": "rosgraph_msgs/msg/Clock", "/joint_states": "sensor_msgs/msg/JointState",
-    "/imu": "sensor_msgs/msg/Imu", "/tf": "tf2_msgs/msg/TFMessage", "/tf_static": "tf2_msgs/msg/TFMessage",
-    "/joint_targets": "sensor_msgs/msg/JointState", "/joint_torques": "sensor_msgs/msg/JointState",
-    "/parameter_events": "rcl_interfaces/msg/ParameterEvent", "/odom/ground_truth": "nav_msgs/msg/Odometry",
-    "/foot_load/left": "geometry_msgs/msg/WrenchStamped",
-    "/foot_load/right": "geometry_msgs/msg/WrenchStamped",
-    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray", "/cpg/state": "std_msgs/msg/Float64MultiArray",
-    "/rosout": "rcl_interfaces/msg/Log", "/sim/fallen": "std_msgs/msg/Bool",
+    ifc.CLOCK: "rosgraph_msgs/msg/Clock", ifc.JOINT_STATES: "sensor_msgs/msg/JointState",
+    ifc.IMU: "sensor_msgs/msg/Imu", ifc.TF: "tf2_msgs/msg/TFMessage", ifc.TF_STATIC: "tf2_msgs/msg/TFMessage",
+    ifc.JOINT_TARGETS: "sensor_msgs/msg/JointState", ifc.JOINT_TORQUES: "sensor_msgs/msg/JointState",
+    ifc.PARAMETER_EVENTS: "rcl_interfaces/msg/ParameterEvent", ifc.ODOM_GROUND_TRUTH: "nav_msgs/msg/Odometry",
+    ifc.FOOT_LOAD_LEFT: "geometry_msgs/msg/WrenchStamped",
+    ifc.FOOT_LOAD_RIGHT: "geometry_msgs/msg/WrenchStamped",
+    ifc.DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray", ifc.CPG_STATE: "std_msgs/msg/Float64MultiArray",
+    "/rosout": "rcl_interfaces/msg/Log", ifc.SIM_FALLEN: "std_msgs/msg/Bool",
 }
 
 
@@ -112,17 +113,17 @@ def test_counts_follow_the_sim_time_and_the_control_period(walk):
     period, odom_period = SIM["control_period"], SIM["odom_period"]
     ticks = [_ns(k * period) for k in range(round(DURATION_S / period))]
     d = walk.data
-    for topic in ("/clock", "/joint_states", "/imu", "/foot_load/left", "/foot_load/right"):
+    for topic in (ifc.CLOCK, ifc.JOINT_STATES, ifc.IMU, ifc.FOOT_LOAD_LEFT, ifc.FOOT_LOAD_RIGHT):
         assert _stamps(d[topic]) == ticks, topic
-    for topic in ("/joint_targets", "/joint_torques"):
+    for topic in (ifc.JOINT_TARGETS, ifc.JOINT_TORQUES):
         stamps = _stamps(d[topic])
         assert stamps[0] <= ticks[START_TICKS] and {t for t in ticks if t >= stamps[0]} <= set(stamps), topic
-    for topic in ("/joint_states", "/imu", "/odom/ground_truth"):
+    for topic in (ifc.JOINT_STATES, ifc.IMU, ifc.ODOM_GROUND_TRUTH):
         assert all(ns == m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for ns, m in d[topic]), topic
-    odom = _stamps(d["/odom/ground_truth"])
+    odom = _stamps(d[ifc.ODOM_GROUND_TRUTH])
     assert all(ns % _ns(odom_period) == 0 for ns in odom) and len(odom) >= DURATION_S / odom_period - 1
-    assert _stamps(d["/tf"]) == odom and len(d["/tf"]) == len(odom)
-    assert len(d["/tf_static"]) == 1
+    assert _stamps(d[ifc.TF]) == odom and len(d[ifc.TF]) == len(odom)
+    assert len(d[ifc.TF_STATIC]) == 1
 
 
 def _matrix(transform) -> np.ndarray:
@@ -154,11 +155,11 @@ def test_tf_is_the_simulated_pose(walk):
     standing_z = {side: float(sim.data.xpos[sim.model.body(body).id][2])
                   for side, body in (("left", "lleg_sole"), ("right", "rleg_sole"))}
     links = {frames.link_name(sim.model.body(b).name) for b in range(1, sim.model.nbody)}
-    static = {t.child_frame_id: t for t in d["/tf_static"][0][1].transforms}
-    odom = dict(d["/odom/ground_truth"])
-    loads = {side: dict(d[f"/foot_load/{side}"]) for side in ("left", "right")}
+    static = {t.child_frame_id: t for t in d[ifc.TF_STATIC][0][1].transforms}
+    odom = dict(d[ifc.ODOM_GROUND_TRUTH])
+    loads = {side: dict(d[ifc.foot_load_topic(side)]) for side in ifc.FOOT_LOAD_SIDES}
     checked = 0
-    for ns, msg in d["/tf"]:
+    for ns, msg in d[ifc.TF]:
         tree = {t.child_frame_id: t for t in msg.transforms}
         assert not set(tree) & set(static)
         tree.update(static)
@@ -181,13 +182,13 @@ def test_tf_is_the_simulated_pose(walk):
             assert frame == odom[ns].header.frame_id
             assert world[2, 3] == pytest.approx(standing_z[side], abs=0.003), (ns, side)
             checked += 1
-    assert checked >= len(d["/tf"])  # at least one foot carries the robot at every sample
+    assert checked >= len(d[ifc.TF])  # at least one foot carries the robot at every sample
 
 
 @pytest.mark.ros
 @pytest.mark.slow
 def test_the_zeta_change_is_in_the_parameter_events(walk):
-    changes = [(ns, p.value.double_value) for ns, ev in walk.data["/parameter_events"] if ev.node == "/cpg"
+    changes = [(ns, p.value.double_value) for ns, ev in walk.data[ifc.PARAMETER_EVENTS] if ev.node == "/cpg"
                for p in ev.changed_parameters if p.name == "zeta"]
     assert len(changes) == 1
     ns, value = changes[0]
@@ -215,10 +216,10 @@ def test_the_plain_mcap_reader_reads_the_file(walk, tmp_path):
     assert counts == {t: len(v) for t, v in walk.data.items()}
     assert len(times) == sum(counts.values()) and times == sorted(times)
     alone = shutil.copy(walk.out / f"{BAG_NAME}.mcap", tmp_path / "alone.mcap")
-    data = read_topics(alone, ["/joint_states", "/tf"])
-    for topic in ("/joint_states", "/tf"):
+    data = read_topics(alone, [ifc.JOINT_STATES, ifc.TF])
+    for topic in (ifc.JOINT_STATES, ifc.TF):
         assert [ns for ns, _ in data[topic]] == [ns for ns, _ in walk.data[topic]]
-    last, expected = data["/joint_states"][-1][1], walk.data["/joint_states"][-1][1]
+    last, expected = data[ifc.JOINT_STATES][-1][1], walk.data[ifc.JOINT_STATES][-1][1]
     assert last.position.tolist() == expected.position.tolist()
 
 
@@ -229,9 +230,9 @@ def test_cpg_walker_record_stops_after_its_duration(walk):
     sim time, from its first /clock."""
     assert walk.side_status == 0, walk.side_log[-2000:]
     d = read_topics(walk.side)
-    clock = _stamps(d["/clock"])
+    clock = _stamps(d[ifc.CLOCK])
     assert clock[-1] - clock[0] == _ns(SIDE_S)
-    assert len(d["/tf"]) >= 1 and len(d["/tf_static"]) == 1
+    assert len(d[ifc.TF]) >= 1 and len(d[ifc.TF_STATIC]) == 1
 
 
 @pytest.mark.ros
@@ -253,7 +254,7 @@ def test_plot_writes_the_pngs(walk, tmp_path):
 @pytest.mark.slow
 def test_robot_description_is_recorded(walk):
     """Needs sim_node's /robot_description (the urdf branch): latched, so recorded once, a URDF."""
-    msgs = walk.data.get("/robot_description", [])
+    msgs = walk.data.get(ifc.ROBOT_DESCRIPTION, [])
     assert len(msgs) == 1
     assert "<robot" in msgs[0][1].data
 
@@ -414,13 +415,13 @@ def test_stock_readers_decode_every_message_alike(walk, stock_decoded):
             other = d.messages[reader][topic]
             bad = [i for i, (a, b) in enumerate(zip(ref, other, strict=True)) if a != b]
             assert not bad, (topic, reader, ref[bad[0]], other[bad[0]])
-    targets = [m for _, _, m in d.messages["foxglove"]["/joint_targets"]]
-    ours = [m for _, m in walk.data["/joint_targets"]]
+    targets = [m for _, _, m in d.messages["foxglove"][ifc.JOINT_TARGETS]]
+    ours = [m for _, m in walk.data[ifc.JOINT_TARGETS]]
     assert [t["name"] for t in targets] == [list(m.name) for m in ours]
     assert [t["position"] for t in targets] == [m.position.tolist() for m in ours]
     assert all(len(t["position"]) == len(t["name"]) > 0 and t["effort"] == [] for t in targets)
-    torques = [m for _, _, m in d.messages["mcap_ros2"]["/joint_torques"]]
-    assert [t["effort"] for t in torques] == [m.effort.tolist() for _, m in walk.data["/joint_torques"]]
+    torques = [m for _, _, m in d.messages["mcap_ros2"][ifc.JOINT_TORQUES]]
+    assert [t["effort"] for t in torques] == [m.effort.tolist() for _, m in walk.data[ifc.JOINT_TORQUES]]
 
 
 # ------------------------------------------------------------------------------ no graph needed
@@ -442,22 +443,22 @@ def test_bag_times_are_stamps_or_the_newest_clock(tmp_path):
     from cpg_walker.nodes.recording import BagRecorder
 
     with BagRecorder(tmp_path) as bag:
-        for topic, msgtype in (("/clock", "rosgraph_msgs/msg/Clock"), ("/js", "sensor_msgs/msg/JointState"),
+        for topic, msgtype in ((ifc.CLOCK, "rosgraph_msgs/msg/Clock"), ("/js", "sensor_msgs/msg/JointState"),
                                ("/x", "std_msgs/msg/Float64MultiArray"),
                                ("/rosout", "rcl_interfaces/msg/Log")):
             assert bag.add_topic(topic, msgtype) is None
         assert "unknown" in bag.add_topic("/y", "no_msgs/msg/Nothing")
-        bag.write("/clock", _serialized(Clock(clock=Time(sec=1, nanosec=500))))
+        bag.write(ifc.CLOCK, _serialized(Clock(clock=Time(sec=1, nanosec=500))))
         js = JointState(name=["a"], position=[1.0])
         js.header.stamp = Time(sec=1, nanosec=2_000_500)  # a target sent one period ahead
         bag.write("/js", _serialized(js))
         bag.write("/x", _serialized(Float64MultiArray(data=[1.0])))
         bag.write("/rosout", _serialized(Log(stamp=Time(sec=1_700_000_000))))
     got = {topic: [ns for ns, _ in v] for topic, v in read_topics(tmp_path).items()}
-    assert got["/clock"] == [1_000_000_500] and got["/js"] == [1_002_000_500]
+    assert got[ifc.CLOCK] == [1_000_000_500] and got["/js"] == [1_002_000_500]
     assert got["/x"] == [1_000_000_500] and got["/rosout"] == [1_000_000_500]
-    assert "/tf" not in got  # no odometry: no /tf sample (the static transforms do not need one)
-    assert len(got["/tf_static"]) == 1
+    assert ifc.TF not in got  # no odometry: no /tf sample (the static transforms do not need one)
+    assert len(got[ifc.TF_STATIC]) == 1
 
 
 def test_odometry_and_joint_states_pair_by_stamp_in_any_order():
@@ -556,24 +557,24 @@ def test_the_recorder_writes_what_stock_rosbags_reads(tmp_path):
     imu = _serialized(Imu())
     js = "sensor_msgs/msg/JointState"
     with BagRecorder(tmp_path / "new") as bag:
-        for topic, msgtype in (("/joint_targets", js), ("/joint_torques", js),
-                               ("/imu", "sensor_msgs/msg/Imu")):
+        for topic, msgtype in ((ifc.JOINT_TARGETS, js), (ifc.JOINT_TORQUES, js),
+                               (ifc.IMU, "sensor_msgs/msg/Imu")):
             bag.add_topic(topic, msgtype)
-        for topic, raw in (("/joint_targets", targets), ("/joint_torques", torques), ("/imu", imu)):
+        for topic, raw in ((ifc.JOINT_TARGETS, targets), (ifc.JOINT_TORQUES, torques), (ifc.IMU, imu)):
             bag.write(topic, raw)
     with AnyReader([tmp_path / "new"]) as reader:
         got = {c.topic: (raw, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages()}
-    assert got["/joint_targets"][1].position.tolist() == [1.0, 2.0]
-    assert got["/joint_torques"][1].effort.tolist() == [5.0, 6.0]
-    assert len(got["/joint_targets"][0]) == len(targets) - 4  # the 4 unset bytes after the empty effort
-    assert len(got["/joint_torques"][0]) == len(torques) - 8
-    assert got["/imu"][0] == imu
+    assert got[ifc.JOINT_TARGETS][1].position.tolist() == [1.0, 2.0]
+    assert got[ifc.JOINT_TORQUES][1].effort.tolist() == [5.0, 6.0]
+    assert len(got[ifc.JOINT_TARGETS][0]) == len(targets) - 4  # the 4 unset bytes after the empty effort
+    assert len(got[ifc.JOINT_TORQUES][0]) == len(torques) - 8
+    assert got[ifc.IMU][0] == imu
     store = typestore()
     old = Writer(tmp_path / "old", version=9, storage_plugin=StoragePlugin.MCAP)
     old.open()
-    old.write(old.add_connection("/joint_torques", js, typestore=store), 1, torques)
+    old.write(old.add_connection(ifc.JOINT_TORQUES, js, typestore=store), 1, torques)
     old.close()
-    assert read_topics(tmp_path / "old")["/joint_torques"][0][1].effort.tolist() == [5.0, 6.0]
+    assert read_topics(tmp_path / "old")[ifc.JOINT_TORQUES][0][1].effort.tolist() == [5.0, 6.0]
 
 
 def test_a_missing_bag_is_one_clear_error(tmp_path):

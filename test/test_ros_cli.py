@@ -14,6 +14,8 @@ import time
 import pytest
 from ros_helpers import ANSWER_S, START_S, node_pids, sim_deadline
 
+from cpg_walker.nodes import interface as ifc
+
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 DISCOVERY = ("--timeout", str(ANSWER_S))  # param/echo: wall s for the node or topic to be discovered
@@ -31,12 +33,12 @@ def test_param_and_topic_tools_against_a_running_graph(graph, probe):
 
     graph.start("pid_node", lockstep=True, wait_for_targets=True)
     graph.start("cpg_node")
-    probe.wait_endpoints("/joint_targets")  # cpg -> pid before the clock starts
-    probe.wait_endpoints("/clock", 0, 1)
+    probe.wait_endpoints(ifc.JOINT_TARGETS)  # cpg -> pid before the clock starts
+    probe.wait_endpoints(ifc.CLOCK, 0, 1)
     # until stopped (no fall stop either): the tools must find the graph running however long they take
     graph.start("sim_node", pacing="lockstep", duration=0.0, stop_on_fall=False)
-    probe.listen("/clock", Clock, 1)
-    probe.wait(lambda: len(probe.received["/clock"]) > 0, "/clock ticking", START_S)
+    probe.listen(ifc.CLOCK, Clock, 1)
+    probe.wait(lambda: len(probe.received[ifc.CLOCK]) > 0, "/clock ticking", START_S)
 
     listed = cli("param", "list", "/cpg", *DISCOVERY)
     assert listed.returncode == 0, listed.stderr
@@ -69,15 +71,15 @@ def test_param_and_topic_tools_against_a_running_graph(graph, probe):
             break
     assert wanted <= set(topics.stdout.splitlines()), topics.stdout
 
-    echo = cli("topic", "echo", "/joint_targets", "--once", *DISCOVERY)
+    echo = cli("topic", "echo", ifc.JOINT_TARGETS, "--once", *DISCOVERY)
     assert echo.returncode == 0, echo.stderr
     assert "- lleg_joint_3" in echo.stdout and "\nposition:\n- " in echo.stdout, echo.stdout[:500]
     assert echo.stdout.rstrip().endswith("---") and echo.stdout.count("---") == 1
-    stamp = cli("topic", "echo", "/joint_targets", "--count", "2", "--field", "header.stamp", *DISCOVERY)
+    stamp = cli("topic", "echo", ifc.JOINT_TARGETS, "--count", "2", "--field", "header.stamp", *DISCOVERY)
     assert stamp.returncode == 0 and stamp.stdout.count("nanosec:") == 2, stamp
 
     # the statistics' form (a rate in wall time: its value is the benchmark's business, not a test's)
-    hz = cli("topic", "hz", "/clock", "--duration", "2")
+    hz = cli("topic", "hz", ifc.CLOCK, "--duration", "2")
     assert hz.returncode == 0, hz.stderr
     summary = re.findall(r"average rate: ([0-9.]+)\n\tmin: [0-9.]+s max: [0-9.]+s std dev: [0-9.]+s "
                          r"window: (\d+)", hz.stdout)

@@ -12,6 +12,8 @@ import pytest
 from ros_helpers import ANSWER_S, START_S
 from test_ros_cli import DISCOVERY, cli
 
+from cpg_walker.nodes import interface as ifc
+
 
 def until(ok, *args: str) -> object:
     """Run the CLI with ``args`` until ``ok(result)`` or ANSWER_S wall s have passed; the last result."""
@@ -99,12 +101,12 @@ def test_node_param_and_topic_info_against_a_running_node(graph, probe, tmp_path
     from sensor_msgs.msg import JointState
 
     from cpg_walker.graph.ros2cli import from_parameter_value
-    from cpg_walker.nodes.pid_node import GAIN_RANGES
+    from cpg_walker.nodes.specs import GAIN_RANGES
 
     graph.start("pid_node")
-    probe.listen("/joint_torques", JointState)
-    probe.wait_endpoints("/joint_torques", 1, 1)  # pid's publisher, the probe's subscription
-    probe.wait(lambda: probe.node.count_subscribers("/joint_targets") >= 1, "pid subscribed", START_S)
+    probe.listen(ifc.JOINT_TORQUES, JointState)
+    probe.wait_endpoints(ifc.JOINT_TORQUES, 1, 1)  # pid's publisher, the probe's subscription
+    probe.wait(lambda: probe.node.count_subscribers(ifc.JOINT_TARGETS) >= 1, "pid subscribed", START_S)
 
     # node list: fully qualified, sorted, this tool's own node hidden
     listed = until(lambda r: {"/pid", "/probe"} <= set(r.stdout.split()), "node", "list")
@@ -168,10 +170,10 @@ def test_node_param_and_topic_info_against_a_running_node(graph, probe, tmp_path
 
     # topic info: counts, then -v's endpoint blocks (rclpy's TopicEndpointInfo text)
     want = "Type: sensor_msgs/msg/JointState\nPublisher count: 1\nSubscription count: 1\n"
-    plain = until(lambda r: r.stdout == want, "topic", "info", "/joint_torques", *DISCOVERY)
+    plain = until(lambda r: r.stdout == want, "topic", "info", ifc.JOINT_TORQUES, *DISCOVERY)
     assert plain.returncode == 0 and plain.stdout == want, plain
     verbose = until(lambda r: "\n\nPublisher count: 1\n\n" in r.stdout and "\n\nSubscription count: 1\n\n"
-                    in r.stdout, "topic", "info", "-v", "/joint_torques", *DISCOVERY)
+                    in r.stdout, "topic", "info", "-v", ifc.JOINT_TORQUES, *DISCOVERY)
     assert verbose.returncode == 0, verbose.stderr
     parts = verbose.stdout.split("\n\n")
     assert parts[0] == "Type: sensor_msgs/msg/JointState" and parts[1] == "Publisher count: 1", parts
@@ -192,12 +194,12 @@ def test_topic_pub_delivers_the_exact_message_and_refuses_bad_fields(probe):
     from geometry_msgs.msg import Twist, Vector3
     from sensor_msgs.msg import JointState
 
-    probe.listen("/cmd_vel", Twist)
+    probe.listen(ifc.CMD_VEL, Twist)
     probe.listen("/pub_states", JointState)
-    got = probe.received["/cmd_vel"]
+    got = probe.received[ifc.CMD_VEL]
     keep = ("--keep-alive", "1")  # wall s for a reliable resend should the probe match late
 
-    once = cli("topic", "pub", "/cmd_vel", "geometry_msgs/msg/Twist",
+    once = cli("topic", "pub", ifc.CMD_VEL, "geometry_msgs/msg/Twist",
                "{linear: {x: 0.1}, angular: {z: -0.2}}", "-1", *keep)
     assert once.returncode == 0, once.stderr
     waited = "Waiting for at least 1 matching subscription(s)...\n"  # -1 waits for one by default
@@ -208,7 +210,7 @@ def test_topic_pub_delivers_the_exact_message_and_refuses_bad_fields(probe):
     probe.spin_for(0.5)
     assert [m for _, m in got] == [Twist(linear=Vector3(x=0.1), angular=Vector3(z=-0.2))]
 
-    times = cli("topic", "pub", "/cmd_vel", "geometry_msgs/Twist", "{angular: {z: 0.3}}", "-t", "3",
+    times = cli("topic", "pub", ifc.CMD_VEL, "geometry_msgs/Twist", "{angular: {z: 0.3}}", "-t", "3",
                 "-r", "20", "-p", "2", *keep)
     assert times.returncode == 0, times.stderr
     assert re.findall(r"publishing #(\d+)", times.stdout) == ["2"], times.stdout  # -p 2: every 2nd shown
@@ -225,7 +227,7 @@ def test_topic_pub_delivers_the_exact_message_and_refuses_bad_fields(probe):
     assert js.header.stamp.sec > 0  # 'auto': stamped at publication
 
     # refused before publishing, naming the field (the other refusals: the unit test above)
-    bad = cli("topic", "pub", "/cmd_vel", "geometry_msgs/msg/Twist", "{linar: {x: 0.1}}", "-1")
+    bad = cli("topic", "pub", ifc.CMD_VEL, "geometry_msgs/msg/Twist", "{linar: {x: 0.1}}", "-1")
     assert bad.returncode == 2 and "no field 'linar' in geometry_msgs/msg/Twist" in bad.stderr, bad
     assert "publisher: beginning loop" not in bad.stdout, bad
     probe.spin_for(0.5)

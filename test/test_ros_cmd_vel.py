@@ -16,6 +16,7 @@ import pytest
 from ros_helpers import START_S
 from test_ros_feedback import StandIn, _diag_values
 
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.walker.cmd_vel import CmdVelLimits, SpeedMap
 
 
@@ -27,10 +28,10 @@ def test_cmd_vel_follow_timeout_resume_and_bad_input(graph, probe):
 
     smap, limits = SpeedMap.load(), CmdVelLimits.load()
     cpg = graph.start("cpg_node")
-    probe.listen("/diagnostics", DiagnosticArray, 500)
-    pub = probe.node.create_publisher(Twist, "/cmd_vel", 10)
+    probe.listen(ifc.DIAGNOSTICS, DiagnosticArray, 500)
+    pub = probe.node.create_publisher(Twist, ifc.CMD_VEL, 10)
     stand_in = StandIn(probe, dt=0.05)
-    for topic in ("/clock", "/imu", "/cmd_vel"):
+    for topic in (ifc.CLOCK, ifc.IMU, ifc.CMD_VEL):
         probe.wait_endpoints(topic, 1, 1)
     sending: dict[str, tuple[float, float] | None] = {"twist": None}
     last_sent = {"t": -1.0}
@@ -46,7 +47,7 @@ def test_cmd_vel_follow_timeout_resume_and_bad_input(graph, probe):
             pub.publish(twist(*sending["twist"]))
             last_sent["t"] = stand_in.now()
 
-    diags = lambda: [(t, v, lvl) for _, m in probe.received["/diagnostics"]  # noqa: E731
+    diags = lambda: [(t, v, lvl) for _, m in probe.received[ifc.DIAGNOSTICS]  # noqa: E731
                      if (d := _diag_values(m)) for t, v in [d] for lvl in [m.status[0].level]]
 
     def holds(pred, v: dict) -> bool:

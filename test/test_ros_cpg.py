@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from ros_helpers import ANSWER_S, START_S, SimWatchdog, double, sim_deadline, string
 
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.walker.controller import DOFS
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -55,27 +56,27 @@ def test_targets_state_and_diagnostics_published(graph, probe):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    for topic, kind in (("/joint_targets", JointState), ("/cpg/state", Float64MultiArray),
-                        ("/diagnostics", DiagnosticArray)):
+    for topic, kind in ((ifc.JOINT_TARGETS, JointState), (ifc.CPG_STATE, Float64MultiArray),
+                        (ifc.DIAGNOSTICS, DiagnosticArray)):
         probe.listen(topic, kind, 200)
     graph.start("pid_node", lockstep=True, wait_for_targets=True)
     cpg = graph.start("cpg_node")
-    probe.wait_endpoints("/joint_targets", 1, 2)  # cpg -> pid (and the probe) before the clock starts
-    probe.wait_endpoints("/clock", 0, 1)
+    probe.wait_endpoints(ifc.JOINT_TARGETS, 1, 2)  # cpg -> pid (and the probe) before the clock starts
+    probe.wait_endpoints(ifc.CLOCK, 0, 1)
     graph.start("sim_node", pacing="lockstep", duration=30.0)
     got = probe.received
-    probe.wait(lambda: len(got["/cpg/state"]) >= 3 and sum(
-        s.name == "cpg_walker/cpg" for _, m in got["/diagnostics"] for s in m.status) >= 3,
+    probe.wait(lambda: len(got[ifc.CPG_STATE]) >= 3 and sum(
+        s.name == "cpg_walker/cpg" for _, m in got[ifc.DIAGNOSTICS] for s in m.status) >= 3,
         lambda: f"3 x /cpg/state and cpg diagnostics: {cpg.log()}", sim_deadline(0.5))
-    target = got["/joint_targets"][-1][1]
+    target = got[ifc.JOINT_TARGETS][-1][1]
     assert set(DOFS) <= set(target.name)
     assert len(target.position) == len(target.velocity) == len(target.name)
     assert all(math.isfinite(x) for x in target.position)
-    state = got["/cpg/state"][-1][1]
+    state = got[ifc.CPG_STATE][-1][1]
     sizes = [d.size for d in state.layout.dim]
     assert sizes[0] == len(DOFS) and sizes[2] == 3 and len(state.data) == sizes[0] * sizes[1] * 3
     assert state.layout.dim[0].label == "dof:" + ",".join(DOFS)
-    status = [s for _, m in got["/diagnostics"] for s in m.status if s.name == "cpg_walker/cpg"][-1]
+    status = [s for _, m in got[ifc.DIAGNOSTICS] for s in m.status if s.name == "cpg_walker/cpg"][-1]
     values = {kv.key: kv.value for kv in status.values}
     assert values["state"] in ("starting", "walking") and float(values["zeta"]) == 1.0
     assert int(values["n_oscillators"]) == sizes[1] - 1
@@ -136,17 +137,17 @@ def test_runtime_zeta_and_alpha_change_the_gait(graph, probe, tmp_path):
 
     period = storage.load(config_path("cpg_humanoid.yaml")).period  # learned stride period (2.513 s)
     t_zeta, settle, strides, settle_alpha = 7.0, 2.5, 4, 5.0  # sim s (the CPG has taken over at 6.6 s)
-    probe.listen("/cpg/state", Float64MultiArray, 500)
-    probe.listen("/diagnostics", DiagnosticArray, 500)
+    probe.listen(ifc.CPG_STATE, Float64MultiArray, 500)
+    probe.listen(ifc.DIAGNOSTICS, DiagnosticArray, 500)
     record = tmp_path / "record.json"
     graph.start("pid_node", lockstep=True, wait_for_targets=True, target_wait=ANSWER_S)
     cpg = graph.start("cpg_node")
-    probe.wait_endpoints("/joint_targets")  # cpg -> pid before the clock starts
-    probe.wait_endpoints("/clock", 0, 1)
+    probe.wait_endpoints(ifc.JOINT_TARGETS)  # cpg -> pid before the clock starts
+    probe.wait_endpoints(ifc.CLOCK, 0, 1)
     # ended by SIGINT once the test has seen enough (the sim writes its record at exit); 120 s: a cap
     graph.start("sim_node", pacing="lockstep", duration=120.0, record_path=str(record))
-    diags = lambda: [d for _, m in probe.received["/diagnostics"] if (d := _diag(m))]  # noqa: E731
-    state = probe.received["/cpg/state"]
+    diags = lambda: [d for _, m in probe.received[ifc.DIAGNOSTICS] if (d := _diag(m))]  # noqa: E731
+    state = probe.received[ifc.CPG_STATE]
 
     def state_now() -> np.ndarray:
         m = state[-1][1]

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from ros_helpers import START_S, SimWatchdog, sim_deadline
 
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.nodes.cpg_params import pathway_list
 from cpg_walker.nodes.validation import validate_imu, validate_load
 from cpg_walker.walker.cpg_driver import FeedbackFade
@@ -114,10 +115,10 @@ class StandIn:
         from sensor_msgs.msg import Imu
 
         self.node, self.dt, self.k = probe.node, dt, 0
-        self.clock = self.node.create_publisher(Clock, "/clock", 10)
-        self.imu = self.node.create_publisher(Imu, "/imu", 10)
-        self.feet = [self.node.create_publisher(WrenchStamped, f"/foot_load/{s}", 10)
-                     for s in ("left", "right")]
+        self.clock = self.node.create_publisher(Clock, ifc.CLOCK, 10)
+        self.imu = self.node.create_publisher(Imu, ifc.IMU, 10)
+        self.feet = [self.node.create_publisher(WrenchStamped, ifc.foot_load_topic(s), 10)
+                     for s in ifc.FOOT_LOAD_SIDES]
         self.Clock, self.Imu, self.Wrench = Clock, Imu, WrenchStamped
         self.send_imu = True
         self.bad_imu: str | None = None  # "nan" | "frame": send one malformed /imu instead of the good one
@@ -165,8 +166,8 @@ def test_feedback_parameters_and_stale_sensor_fade(graph, probe):
     from cpg_walker.graph.ros2cli import from_parameter_value
 
     cpg = graph.start("cpg_node", feedback_fade=0.3, sensor_timeout=0.05)
-    probe.listen("/diagnostics", DiagnosticArray, 500)
-    probe.listen("/joint_targets", JointState, 500)
+    probe.listen(ifc.DIAGNOSTICS, DiagnosticArray, 500)
+    probe.listen(ifc.JOINT_TARGETS, JointState, 500)
 
     def value(kind: int, **kw) -> ParameterValue:
         return ParameterValue(type=kind, **kw)
@@ -200,9 +201,9 @@ def test_feedback_parameters_and_stale_sensor_fade(graph, probe):
     assert from_parameter_value(probe.get_params("cpg", ["feedback.gain_scale"])[0]) == 0.02
 
     stand_in = StandIn(probe)
-    probe.wait_endpoints("/clock", 1, 1)
-    probe.wait_endpoints("/imu", 1, 1)
-    diags = lambda: [d for _, m in probe.received["/diagnostics"] if (d := _diag_values(m))]  # noqa: E731
+    probe.wait_endpoints(ifc.CLOCK, 1, 1)
+    probe.wait_endpoints(ifc.IMU, 1, 1)
+    diags = lambda: [d for _, m in probe.received[ifc.DIAGNOSTICS] if (d := _diag_values(m))]  # noqa: E731
 
     def until(pred, what: str) -> tuple[float, dict]:
         probe.wait(lambda: any(pred(t, v) for t, v in diags()), lambda: f"{what}: {diags()[-3:]}\n"
@@ -229,7 +230,7 @@ def test_feedback_parameters_and_stale_sensor_fade(graph, probe):
     log = cpg.log()
     assert "dropped /imu: non-finite" in log and "dropped /imu: frame 'base_link'" in log, log[-2000:]
     assert "feedback active -> fading" in log and "fading -> stale" in log
-    targets = [m for _, m in probe.received["/joint_targets"]]
+    targets = [m for _, m in probe.received[ifc.JOINT_TARGETS]]
     assert targets and all(np.isfinite(m.position).all() and np.isfinite(m.velocity).all() for m in targets)
 
 
@@ -243,13 +244,13 @@ def test_a_re_sent_tick_is_answered_again_the_first_one_too(graph, probe):
     from sensor_msgs.msg import JointState
 
     cpg = graph.start("cpg_node", feedback=False)
-    probe.listen("/joint_targets", JointState, 500)
+    probe.listen(ifc.JOINT_TARGETS, JointState, 500)
     stand_in = StandIn(probe, dt=0.002)
-    probe.wait_endpoints("/clock", 1, 1)
-    probe.wait_endpoints("/joint_targets", 1, 1)
+    probe.wait_endpoints(ifc.CLOCK, 1, 1)
+    probe.wait_endpoints(ifc.JOINT_TARGETS, 1, 1)
 
     def answers(k: int) -> list:
-        return [m for _, m in probe.received["/joint_targets"] if m.header.stamp.sec == 0
+        return [m for _, m in probe.received[ifc.JOINT_TARGETS] if m.header.stamp.sec == 0
                 and m.header.stamp.nanosec == round(k * stand_in.dt * 1e9)]
 
     def send(k: int) -> None:

@@ -16,6 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.robot.joints import JOINT_NAMES
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -23,8 +24,8 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 #: Fuzzed nodes: executable -> ROS node name.
 NODES = {"sim_node": "sim", "pid_node": "pid", "cpg_node": "cpg"}
 #: The topics the nodes subscribe to, each fuzzed with MESSAGES_PER_TOPIC messages.
-TOPICS = ("/joint_targets", "/joint_torques", "/imu", "/foot_load/left", "/foot_load/right", "/clock",
-          "/cmd_vel", "/joint_trajectory", "/sim/servo_hold")
+TOPICS = (ifc.JOINT_TARGETS, ifc.JOINT_TORQUES, ifc.IMU, ifc.FOOT_LOAD_LEFT, ifc.FOOT_LOAD_RIGHT, ifc.CLOCK,
+          ifc.CMD_VEL, ifc.JOINT_TRAJECTORY, ifc.SIM_SERVO_HOLD)
 MESSAGES_PER_TOPIC = 12
 #: frame_id of the probe's own fuzzed /joint_targets (a JointState's frame is not read by pid_node), so the
 #: finiteness check reads cpg_node's targets only
@@ -68,9 +69,9 @@ class Walking:
         from ros_helpers import ANSWER_S
 
         self.alive()
-        states, targets = len(self.got["/joint_states"]), len(self.got["/joint_targets"])
-        self.probe.wait(lambda: len(self.got["/joint_states"]) > states + 50
-                        and len(self.got["/joint_targets"]) > targets + 50,
+        states, targets = len(self.got[ifc.JOINT_STATES]), len(self.got[ifc.JOINT_TARGETS])
+        self.probe.wait(lambda: len(self.got[ifc.JOINT_STATES]) > states + 50
+                        and len(self.got[ifc.JOINT_TARGETS]) > targets + 50,
                         "50 more /joint_states and /joint_targets", ANSWER_S)
         self.alive()
 
@@ -90,15 +91,15 @@ def walking():
     graph = Graph(Path(tempfile.mkdtemp(prefix="fuzz_logs_")), domain_id=domain)
     probe = Probe(domain)
     try:
-        for topic, cls in (("/joint_states", JointState), ("/joint_targets", JointState),
-                           ("/joint_torques", JointState), ("/diagnostics", DiagnosticArray),
-                           ("/odom/ground_truth", Odometry)):
+        for topic, cls in ((ifc.JOINT_STATES, JointState), (ifc.JOINT_TARGETS, JointState),
+                           (ifc.JOINT_TORQUES, JointState), (ifc.DIAGNOSTICS, DiagnosticArray),
+                           (ifc.ODOM_GROUND_TRUTH, Odometry)):
             probe.listen(topic, cls, 1000)
         graph.start("pid_node")
         graph.start("cpg_node")
         graph.start("sim_node")
-        probe.wait(lambda: len(probe.received["/joint_targets"]) > 10
-                   and len(probe.received["/joint_states"]) > 10, "the graph running", START_S)
+        probe.wait(lambda: len(probe.received[ifc.JOINT_TARGETS]) > 10
+                   and len(probe.received[ifc.JOINT_STATES]) > 10, "the graph running", START_S)
         yield Walking(graph, probe, lock)
     finally:
         probe.close()
@@ -248,9 +249,9 @@ def _messages(draw, topic: str | None = None) -> tuple[str, object]:
     from cpg_walker.robot.frames import FOOT_LOAD_FRAMES, IMU_FRAME
 
     topic = topic or draw(st.sampled_from(TOPICS))
-    if topic in ("/joint_targets", "/joint_torques"):
+    if topic in (ifc.JOINT_TARGETS, ifc.JOINT_TORQUES):
         msg = _joint_state(draw)
-    elif topic == "/imu":
+    elif topic == ifc.IMU:
         msg = Imu()
         msg.header.frame_id = draw(st.one_of(st.just(IMU_FRAME), TEXT))
         o, w = msg.orientation, msg.angular_velocity
@@ -263,13 +264,13 @@ def _messages(draw, topic: str | None = None) -> tuple[str, object]:
         msg.header.frame_id = draw(st.one_of(st.sampled_from(frames), TEXT))
         f = msg.wrench.force
         f.x, f.y, f.z = draw(st.tuples(FLOATS, FLOATS, FLOATS))
-    elif topic == "/clock":
+    elif topic == ifc.CLOCK:
         msg = Clock()
         msg.clock.sec, msg.clock.nanosec = draw(_stamps())
         return topic, msg
-    elif topic == "/sim/servo_hold":  # a Bool cannot be malformed: a wild sequence (re-entries, no crash)
+    elif topic == ifc.SIM_SERVO_HOLD:  # a Bool cannot be malformed: a wild sequence (re-entries, no crash)
         return topic, Bool(data=draw(st.booleans()))
-    elif topic == "/cmd_vel":
+    elif topic == ifc.CMD_VEL:
         msg = Twist()
         msg.linear.x, msg.linear.y, msg.angular.z = draw(st.tuples(FLOATS, FLOATS, FLOATS))
         return topic, msg
@@ -296,7 +297,7 @@ def _finite_odom(msg) -> bool:
 
 def _cpg_diagnostics(walking) -> dict:
     """The newest /diagnostics key-values of cpg_node (those with ``cmd_vel_dropped``)."""
-    for _, msg in reversed(walking.got["/diagnostics"]):
+    for _, msg in reversed(walking.got[ifc.DIAGNOSTICS]):
         for status in msg.status:
             values = {kv.key: kv.value for kv in status.values}
             if "cmd_vel_dropped" in values:
@@ -306,17 +307,15 @@ def _cpg_diagnostics(walking) -> dict:
 
 def test_malformed_messages_on_every_topic_never_reach_the_simulation(walking):
     from geometry_msgs.msg import Twist, WrenchStamped
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu, JointState
     from std_msgs.msg import Bool
     from trajectory_msgs.msg import JointTrajectory
 
-    types = {"/joint_targets": JointState, "/joint_torques": JointState, "/imu": Imu,
-             "/foot_load/left": WrenchStamped, "/foot_load/right": WrenchStamped, "/clock": Clock,
-             "/cmd_vel": Twist, "/joint_trajectory": JointTrajectory, "/sim/servo_hold": Bool}
-    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)  # as the sim's
+    types = {ifc.JOINT_TARGETS: JointState, ifc.JOINT_TORQUES: JointState, ifc.IMU: Imu,
+             ifc.FOOT_LOAD_LEFT: WrenchStamped, ifc.FOOT_LOAD_RIGHT: WrenchStamped, ifc.CLOCK: Clock,
+             ifc.CMD_VEL: Twist, ifc.JOINT_TRAJECTORY: JointTrajectory, ifc.SIM_SERVO_HOLD: Bool}
+    latched = ifc.latched_qos()  # as the sim's
     probe = walking.probe
     pubs = {topic: probe.node.create_publisher(cls, topic, latched if cls is Bool else 10)
             for topic, cls in types.items()}
@@ -326,7 +325,7 @@ def test_malformed_messages_on_every_topic_never_reach_the_simulation(walking):
 
     def check(item):
         topic, msg = item
-        if topic == "/joint_targets":  # marked: the probe hears its own, late now and then (1000/s of
+        if topic == ifc.JOINT_TARGETS:  # marked: the probe hears its own, late now and then (1000/s of
             msg.header.frame_id = PROBE_FRAME  # cpg_node's queue ahead of them)
         pubs[topic].publish(msg)
         sent[topic] = sent.get(topic, 0) + 1
@@ -335,15 +334,15 @@ def test_malformed_messages_on_every_topic_never_reach_the_simulation(walking):
     for topic in TOPICS:  # every topic its share of examples
         settings(FUZZ, max_examples=MESSAGES_PER_TOPIC)(given(item=_messages(topic))(check))()
     probe.spin_for(0.5)
-    walking.got["/joint_targets"].clear()  # the probe's own ones: from here on only cpg_node's
+    walking.got[ifc.JOINT_TARGETS].clear()  # the probe's own ones: from here on only cpg_node's
     # a NaN /cmd_vel and a NaN /imu are dropped and counted in cpg_node's diagnostics
     before = _cpg_diagnostics(walking)
     bad_cmd = Twist()
     bad_cmd.linear.x = math.nan
-    pubs["/cmd_vel"].publish(bad_cmd)
+    pubs[ifc.CMD_VEL].publish(bad_cmd)
     bad_imu = Imu()
     bad_imu.orientation.w = math.nan
-    pubs["/imu"].publish(bad_imu)
+    pubs[ifc.IMU].publish(bad_imu)
     probe.wait(lambda: int(_cpg_diagnostics(walking).get("cmd_vel_dropped", 0))
                > int(before.get("cmd_vel_dropped", 0))
                and int(_cpg_diagnostics(walking).get("sensors_dropped", 0))
@@ -351,14 +350,14 @@ def test_malformed_messages_on_every_topic_never_reach_the_simulation(walking):
                lambda: f"the drops counted in cpg_node's /diagnostics: {_cpg_diagnostics(walking)}")
     walking.still_runs()
     assert set(sent) == set(types) == set(TOPICS), sent
-    sim = [{kv.key: kv.value for kv in st.values} for _, m in walking.got["/diagnostics"] for st in m.status
+    sim = [{kv.key: kv.value for kv in st.values} for _, m in walking.got[ifc.DIAGNOSTICS] for st in m.status
            if st.name == "cpg_walker/sim"]
     assert sim and int(sim[-1]["torques_rejected"]) > 0, sim[-1:]  # the sim counts what it refused
-    states = [m for _, m in walking.got["/joint_states"]]
+    states = [m for _, m in walking.got[ifc.JOINT_STATES]]
     assert states and all(_finite_state(m) for m in states)
-    odom = [m for _, m in walking.got["/odom/ground_truth"]]
+    odom = [m for _, m in walking.got[ifc.ODOM_GROUND_TRUTH]]
     assert odom and all(_finite_odom(m) for m in odom)
-    targets = [m for _, m in walking.got["/joint_targets"] if m.header.frame_id != PROBE_FRAME]
+    targets = [m for _, m in walking.got[ifc.JOINT_TARGETS] if m.header.frame_id != PROBE_FRAME]
     bad = [m for m in targets if not _finite_state(m)]
     assert targets and not bad, bad[:2]
     for exe in walking.graph.procs:  # the refusals were logged, throttled per reason

@@ -16,6 +16,7 @@ import pytest
 from ros_helpers import ANSWER_S, START_S, Probe, double, sim_deadline, string
 
 from cpg_walker.graph.processes import Graph
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.nodes.messages import stamp_ns
 from cpg_walker.robot.joints import JOINT_NAMES
 
@@ -36,12 +37,12 @@ def _wait_matched(probe: Probe, *publishers) -> None:
 
 
 def _head(probe: Probe) -> float:
-    return float(probe.received["/joint_states"][-1][1].position[HEAD])
+    return float(probe.received[ifc.JOINT_STATES][-1][1].position[HEAD])
 
 
 def _settled(probe: Probe, q: float, tol: float, sim_s: float = 0.5) -> bool:
     """The head has been within ``tol`` of ``q`` in every state received over the last ``sim_s`` sim s."""
-    states = probe.received["/joint_states"]
+    states = probe.received[ifc.JOINT_STATES]
     if not states:
         return False
     since = _sim_now(probe) - round(sim_s * 1e9)
@@ -52,7 +53,7 @@ def _settled(probe: Probe, q: float, tol: float, sim_s: float = 0.5) -> bool:
 
 def _sim_now(probe: Probe) -> int:
     """The latest /joint_states stamp received (ns of sim time)."""
-    return stamp_ns(probe.received["/joint_states"][-1][1])
+    return stamp_ns(probe.received[ifc.JOINT_STATES][-1][1])
 
 
 def _span_ns(received: list) -> int:
@@ -77,49 +78,47 @@ def test_topics_types_rates_services_and_fall_status(graph, probe):
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from geometry_msgs.msg import WrenchStamped
     from nav_msgs.msg import Odometry
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu, JointState
     from std_msgs.msg import Bool
     from std_srvs.srv import Trigger
 
     expected = {
-        "/clock": Clock, "/joint_states": JointState, "/joint_torques": JointState, "/imu": Imu,
-        "/foot_load/left": WrenchStamped, "/foot_load/right": WrenchStamped,
-        "/odom/ground_truth": Odometry, "/diagnostics": DiagnosticArray,
+        ifc.CLOCK: Clock, ifc.JOINT_STATES: JointState, ifc.JOINT_TORQUES: JointState, ifc.IMU: Imu,
+        ifc.FOOT_LOAD_LEFT: WrenchStamped, ifc.FOOT_LOAD_RIGHT: WrenchStamped,
+        ifc.ODOM_GROUND_TRUTH: Odometry, ifc.DIAGNOSTICS: DiagnosticArray,
     }
     for topic, msg_type in expected.items():
         probe.listen(topic, msg_type, qos=2000)
-    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    probe.listen("/sim/fallen", Bool, qos=latched)
+    latched = ifc.latched_qos()
+    probe.listen(ifc.SIM_FALLEN, Bool, qos=latched)
     graph.start("pid_node")
     graph.start("sim_node", pacing=CLOSED_LOOP, push__force=[0.0, 120.0, 0.0], push__duration=0.3)
     got = probe.received
     # discovery matches each endpoint pair on its own (occasionally seconds apart): wait for all
-    probe.wait(lambda: all(len(got[t]) > 0 for t in [*expected, "/sim/fallen"]),
+    probe.wait(lambda: all(len(got[t]) > 0 for t in [*expected, ifc.SIM_FALLEN]),
                lambda: f"a message on every topic: {({t: len(v) for t, v in got.items()})}", START_S)
     # sim-time rates: collect one sim second of every topic (by stamps, whatever the wall time it takes)
-    periodic = {"/joint_states": CONTROL_NS, "/joint_torques": CONTROL_NS, "/imu": CONTROL_NS,
-                "/foot_load/left": CONTROL_NS, "/foot_load/right": CONTROL_NS,
-                "/odom/ground_truth": 5 * CONTROL_NS}  # odom_period 0.01 s
-    earlier = {t: [stamp_ns(m) for _, m in got[t]] for t in ("/joint_states", "/joint_torques")}
-    for topic in [*periodic, "/clock"]:
+    periodic = {ifc.JOINT_STATES: CONTROL_NS, ifc.JOINT_TORQUES: CONTROL_NS, ifc.IMU: CONTROL_NS,
+                ifc.FOOT_LOAD_LEFT: CONTROL_NS, ifc.FOOT_LOAD_RIGHT: CONTROL_NS,
+                ifc.ODOM_GROUND_TRUTH: 5 * CONTROL_NS}  # odom_period 0.01 s
+    earlier = {t: [stamp_ns(m) for _, m in got[t]] for t in (ifc.JOINT_STATES, ifc.JOINT_TORQUES)}
+    for topic in [*periodic, ifc.CLOCK]:
         got[topic].clear()
-    probe.wait(lambda: all(_span_ns(got[t]) >= 1_000_000_000 for t in periodic) and got["/clock"],
+    probe.wait(lambda: all(_span_ns(got[t]) >= 1_000_000_000 for t in periodic) and got[ifc.CLOCK],
                lambda: f"1 sim s on every topic: {({t: _span_ns(got[t]) / 1e9 for t in periodic})}")
     types = dict(probe.node.get_topic_names_and_types())
     for topic, msg_type in expected.items():
         name = f"{msg_type.__module__.split('.')[0]}/msg/{msg_type.__name__}"
         assert name in types.get(topic, []), f"{topic}: {types.get(topic)}"
-    js = [m for _, m in got["/joint_states"]]
+    js = [m for _, m in got[ifc.JOINT_STATES]]
     assert list(js[-1].name) == list(JOINT_NAMES)
     assert len(js[-1].position) == len(js[-1].velocity) == len(js[-1].effort) == 25
     # one state (with its IMU sample, sole loads) per 2 ms control period, odometry at 100 Hz of sim time
     for topic, period in periodic.items():
         _assert_every_period([stamp_ns(m) for _, m in got[topic]], period, topic)
-    clock = [m.clock.sec * 1_000_000_000 + m.clock.nanosec for _, m in got["/clock"]]
-    _assert_every_period(clock, CONTROL_NS, "/clock")
+    clock = [m.clock.sec * 1_000_000_000 + m.clock.nanosec for _, m in got[ifc.CLOCK]]
+    _assert_every_period(clock, CONTROL_NS, ifc.CLOCK)
     # torques answer states: stamped with the stamps of the states (on the 2 ms grid, every period); over
     # the whole run (a probe that falls behind a fast sim reads each topic's backlog from another point)
     def seen(topic: str) -> set[int]:
@@ -127,38 +126,38 @@ def test_topics_types_rates_services_and_fall_status(graph, probe):
 
     # the two backlogs may not overlap yet (CI once: every torque seen was newer than every state seen):
     # spin on until they do, the sim going on
-    probe.wait(lambda: seen("/joint_states") & seen("/joint_torques"),
+    probe.wait(lambda: seen(ifc.JOINT_STATES) & seen(ifc.JOINT_TORQUES),
                lambda: f"a torque stamped as a state seen: states up to {max(seen('/joint_states'))}, "
                        f"torques from {min(seen('/joint_torques'))}")
-    assert all(t % CONTROL_NS == 0 for t in seen("/joint_torques"))
-    imu = got["/imu"][-1][1]
+    assert all(t % CONTROL_NS == 0 for t in seen(ifc.JOINT_TORQUES))
+    imu = got[ifc.IMU][-1][1]
     assert imu.header.frame_id == "imu"
     assert imu.linear_acceleration.z == pytest.approx(9.81, abs=1.0)  # standing still, specific force
     assert all(imu.angular_velocity_covariance[i] > 0 for i in (0, 4, 8))
-    total = sum(got[f"/foot_load/{s}"][-1][1].wrench.force.z for s in ("left", "right"))
+    total = sum(got[ifc.foot_load_topic(s)][-1][1].wrench.force.z for s in ifc.FOOT_LOAD_SIDES)
     assert total == pytest.approx(7.16 * 9.81, rel=0.15)
-    odom = got["/odom/ground_truth"][-1][1]
+    odom = got[ifc.ODOM_GROUND_TRUTH][-1][1]
     assert (odom.header.frame_id, odom.child_frame_id) == ("odom", "base_link")
     assert 0.25 < odom.pose.pose.position.z < 0.32
-    assert got["/sim/fallen"][-1][1].data is False
-    diag = got["/diagnostics"][-1][1].status[0]
+    assert got[ifc.SIM_FALLEN][-1][1].data is False
+    diag = got[ifc.DIAGNOSTICS][-1][1].status[0]
     assert diag.name == "cpg_walker/sim" and diag.level == DiagnosticStatus.OK
     # push (120 N sideways for 0.3 s) topples the robot; the fall is reported, reset stands it up
     assert probe.call(Trigger, "/sim/push").success
-    probe.wait(lambda: got["/sim/fallen"][-1][1].data, "a fall reported on /sim/fallen")
+    probe.wait(lambda: got[ifc.SIM_FALLEN][-1][1].data, "a fall reported on /sim/fallen")
     # the fall in /diagnostics too, and no report stamped after it says otherwise (messages of different
     # topics may arrive in any order: an older OK report can come in after /sim/fallen)
-    errors = lambda: [stamp_ns(m) for _, m in got["/diagnostics"]  # noqa: E731
+    errors = lambda: [stamp_ns(m) for _, m in got[ifc.DIAGNOSTICS]  # noqa: E731
                       if m.status[0].level == DiagnosticStatus.ERROR]
     probe.wait(lambda: errors(), "/diagnostics reporting the fall")
-    after = [m.status[0] for _, m in got["/diagnostics"] if stamp_ns(m) >= min(errors())]
+    after = [m.status[0] for _, m in got[ifc.DIAGNOSTICS] if stamp_ns(m) >= min(errors())]
     assert all(st.level == DiagnosticStatus.ERROR and st.message == "fallen" for st in after), after
     reset = probe.call(Trigger, "/sim/reset")
     assert reset.success, reset.message
     reset_ns = round(float(re.search(r"at sim time ([0-9.]+) s", reset.message).group(1)) * 1e9)
-    probe.wait(lambda: not got["/sim/fallen"][-1][1].data, "/sim/fallen false after the reset")
-    probe.wait(lambda: stamp_ns(got["/odom/ground_truth"][-1][1]) > reset_ns, "odometry after the reset")
-    assert got["/odom/ground_truth"][-1][1].pose.pose.position.z > 0.25
+    probe.wait(lambda: not got[ifc.SIM_FALLEN][-1][1].data, "/sim/fallen false after the reset")
+    probe.wait(lambda: stamp_ns(got[ifc.ODOM_GROUND_TRUTH][-1][1]) > reset_ns, "odometry after the reset")
+    assert got[ifc.ODOM_GROUND_TRUTH][-1][1].pose.pose.position.z > 0.25
 
 
 def test_realtime_pacing_publishes_every_period_of_sim_time(graph, probe):
@@ -169,24 +168,24 @@ def test_realtime_pacing_publishes_every_period_of_sim_time(graph, probe):
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import JointState
 
-    probe.listen("/joint_states", JointState, 2000)
-    probe.listen("/clock", Clock, 2000)
-    probe.listen("/diagnostics", DiagnosticArray, 50)
+    probe.listen(ifc.JOINT_STATES, JointState, 2000)
+    probe.listen(ifc.CLOCK, Clock, 2000)
+    probe.listen(ifc.DIAGNOSTICS, DiagnosticArray, 50)
     graph.start("pid_node")
     graph.start("sim_node", pacing="realtime")
     got = probe.received
-    probe.wait(lambda: len(got["/joint_states"]) > 0, "/joint_states", START_S)
-    got["/joint_states"].clear()
+    probe.wait(lambda: len(got[ifc.JOINT_STATES]) > 0, ifc.JOINT_STATES, START_S)
+    got[ifc.JOINT_STATES].clear()
     def sim_diagnostics() -> list[dict]:
         """The sim's diagnostics sent after it had run (the one sent at start-up reports 0 s and speed 0)."""
-        sent = [{kv.key: kv.value for kv in m.status[0].values} for _, m in list(got["/diagnostics"])]
+        sent = [{kv.key: kv.value for kv in m.status[0].values} for _, m in list(got[ifc.DIAGNOSTICS])]
         return [v for v in sent if "pacing" in v and float(v["sim_time_s"]) > 0]
 
-    probe.wait(lambda: _span_ns(got["/joint_states"]) >= 1_000_000_000 and got["/clock"]
+    probe.wait(lambda: _span_ns(got[ifc.JOINT_STATES]) >= 1_000_000_000 and got[ifc.CLOCK]
                and sim_diagnostics(), "1 sim s of /joint_states, /clock, and /diagnostics after t = 0")
-    _assert_every_period([stamp_ns(m) for _, m in got["/joint_states"]], CONTROL_NS, "/joint_states")
-    clock = [m.clock.sec * 1_000_000_000 + m.clock.nanosec for _, m in got["/clock"]]
-    _assert_every_period(clock, CONTROL_NS, "/clock")
+    _assert_every_period([stamp_ns(m) for _, m in got[ifc.JOINT_STATES]], CONTROL_NS, ifc.JOINT_STATES)
+    clock = [m.clock.sec * 1_000_000_000 + m.clock.nanosec for _, m in got[ifc.CLOCK]]
+    _assert_every_period(clock, CONTROL_NS, ifc.CLOCK)
     values = sim_diagnostics()[-1]
     assert values["pacing"] == "realtime" and float(values["real_time_factor"]) > 0, values
 
@@ -199,8 +198,8 @@ def _lockstep_run(graph: Graph, probe: Probe, tmp_path, tag: str, duration: floa
         graph.start("pid_node", lockstep=True, wait_for_targets=True, target_wait=ANSWER_S,
                     startup_wait=START_S)
         graph.start("target_player_node")
-        probe.wait_endpoints("/joint_targets")  # player -> pid, and the player's /clock subscription
-        probe.wait_endpoints("/clock", publishers=0)
+        probe.wait_endpoints(ifc.JOINT_TARGETS)  # player -> pid, and the player's /clock subscription
+        probe.wait_endpoints(ifc.CLOCK, publishers=0)
         graph.start("sim_node", pacing="lockstep", duration=duration, record_path=str(record),
                     record_period=0.002)
         assert graph.wait("sim_node", timeout=sim_deadline(duration)) == 0
@@ -212,8 +211,8 @@ def _lockstep_run(graph: Graph, probe: Probe, tmp_path, tag: str, duration: floa
 def test_lockstep_runs_are_identical(graph, probe, tmp_path):
     first = _lockstep_run(graph, probe, tmp_path, "a", 1.5)
     # the first graph's nodes gone from the graph before the second's start (or the waits see them)
-    probe.wait(lambda: probe.node.count_subscribers("/joint_targets") == 0
-               and probe.node.count_publishers("/joint_targets") == 0, "the first graph gone")
+    probe.wait(lambda: probe.node.count_subscribers(ifc.JOINT_TARGETS) == 0
+               and probe.node.count_publishers(ifc.JOINT_TARGETS) == 0, "the first graph gone")
     second = _lockstep_run(Graph(tmp_path / "logs_b", domain_id=graph.domain_id), probe, tmp_path, "b", 1.5)
     qa, qb = np.array(first["q"]), np.array(second["q"])
     assert qa.shape == qb.shape == (750, 25)
@@ -226,11 +225,11 @@ def test_lockstep_runs_are_identical(graph, probe, tmp_path):
 def test_watchdog_holds_the_last_target_posture(graph, probe):
     from sensor_msgs.msg import JointState
 
-    probe.listen("/joint_states", JointState, qos=100)
-    pub = probe.node.create_publisher(JointState, "/joint_targets", 10)
+    probe.listen(ifc.JOINT_STATES, JointState, qos=100)
+    pub = probe.node.create_publisher(JointState, ifc.JOINT_TARGETS, 10)
     graph.start("pid_node", target_timeout=0.05)
     graph.start("sim_node", pacing=CLOSED_LOOP)
-    probe.wait(lambda: len(probe.received["/joint_states"]) > 10, "/joint_states", START_S)
+    probe.wait(lambda: len(probe.received[ifc.JOINT_STATES]) > 10, ifc.JOINT_STATES, START_S)
     _wait_matched(probe, pub)
     target = JointState(name=["head_joint_1"], position=[0.4])
     probe.wait(lambda: _settled(probe, 0.4, 0.05), lambda: f"head settled at 0.4: {_head(probe)}",
@@ -255,12 +254,12 @@ def test_watchdog_holds_the_last_target_posture(graph, probe):
 def test_bad_messages_never_reach_the_robot(graph, probe):
     from sensor_msgs.msg import JointState
 
-    probe.listen("/joint_states", JointState, qos=100)
-    targets = probe.node.create_publisher(JointState, "/joint_targets", 10)
-    torques = probe.node.create_publisher(JointState, "/joint_torques", 10)
+    probe.listen(ifc.JOINT_STATES, JointState, qos=100)
+    targets = probe.node.create_publisher(JointState, ifc.JOINT_TARGETS, 10)
+    torques = probe.node.create_publisher(JointState, ifc.JOINT_TORQUES, 10)
     graph.start("pid_node")
     graph.start("sim_node", pacing=CLOSED_LOOP)
-    probe.wait(lambda: len(probe.received["/joint_states"]) > 10, "/joint_states", START_S)
+    probe.wait(lambda: len(probe.received[ifc.JOINT_STATES]) > 10, ifc.JOINT_STATES, START_S)
     _wait_matched(probe, targets, torques)
     rest, bad_from = _head(probe), _sim_now(probe)
     bad = [
@@ -286,7 +285,7 @@ def test_bad_messages_never_reach_the_robot(graph, probe):
     probe.wait(lambda: all(repeated(r) for r in reasons)
                and "rejected /joint_torques: non-finite effort" in sim.log(),
                lambda: f"every rejection, repeated: {pid.log()[-1500:]}\n{sim.log()[-500:]}", each=send_bad)
-    moved = [(stamp_ns(m), m.position[HEAD]) for _, m in probe.received["/joint_states"]
+    moved = [(stamp_ns(m), m.position[HEAD]) for _, m in probe.received[ifc.JOINT_STATES]
              if stamp_ns(m) >= bad_from and abs(m.position[HEAD] - rest) >= 0.02]
     assert not moved, moved[:10]  # the head stayed at rest all along
     for reason in reasons:  # throttled per reason: the warnings stand for more rejections than they are
@@ -343,20 +342,18 @@ def test_robot_description_reaches_a_late_subscriber(graph, probe):
     The sim waits for a controller (none here): the description is there before the first period."""
     import xml.etree.ElementTree as ET
 
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from std_msgs.msg import String
 
     from cpg_walker.robot.urdf import read_urdf
 
     graph.start("sim_node", pacing="lockstep")
-    probe.wait(lambda: probe.node.count_publishers("/robot_description") > 0, "sim_node's /robot_description",
-               START_S)
-    assert probe.node.count_subscribers("/robot_description") == 0  # nobody listened when it was published
-    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    probe.listen("/robot_description", String, qos=latched)
-    probe.wait(lambda: probe.received["/robot_description"], "the URDF on /robot_description")
-    text = probe.received["/robot_description"][0][1].data
+    probe.wait(lambda: probe.node.count_publishers(ifc.ROBOT_DESCRIPTION) > 0,
+               "sim_node's /robot_description", START_S)
+    assert probe.node.count_subscribers(ifc.ROBOT_DESCRIPTION) == 0  # nobody listened when it was published
+    latched = ifc.latched_qos()
+    probe.listen(ifc.ROBOT_DESCRIPTION, String, qos=latched)
+    probe.wait(lambda: probe.received[ifc.ROBOT_DESCRIPTION], "the URDF on /robot_description")
+    text = probe.received[ifc.ROBOT_DESCRIPTION][0][1].data
     assert text == read_urdf()
     robot = ET.fromstring(text)
     assert robot.get("name") == "hoap2" and robot.find("link").get("name") == "base_link"

@@ -20,6 +20,8 @@ import time
 import numpy as np
 import pytest
 
+from cpg_walker.nodes import interface as ifc
+
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 HANDOVER_S = 6.616  # the CPG drives alone from here (cpg_node: recording's opening steps + 1 s cross-fade)
@@ -29,7 +31,7 @@ AFTER_S = 8.0  # sim s the robot must walk on after a stall
 
 def _sim_time(probe) -> float:
     """The newest sim time seen: the stamps of /diagnostics (sim_node every 1 s, cpg_node every 0.1 s)."""
-    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in probe.received["/diagnostics"]]
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in probe.received[ifc.DIAGNOSTICS]]
     return max(stamps, default=0.0)
 
 
@@ -57,10 +59,10 @@ def _start_walk(graph, probe, duration: float, record) -> None:
     realtime pacing once cpg_node is up."""
     from diagnostic_msgs.msg import DiagnosticArray
 
-    probe.listen("/diagnostics", DiagnosticArray, 200)
+    probe.listen(ifc.DIAGNOSTICS, DiagnosticArray, 200)
     graph.start("pid_node", wait_for_targets=True)
     cpg = graph.start("cpg_node")
-    up = lambda: probe.node.count_publishers("/joint_trajectory") > 0  # noqa: E731
+    up = lambda: probe.node.count_publishers(ifc.JOINT_TRAJECTORY) > 0  # noqa: E731
     assert probe.spin_for(120.0, until=up), cpg.log()
     graph.start("sim_node", pacing="realtime", duration=duration, record_path=str(record))
 
@@ -132,17 +134,17 @@ def test_the_robot_walks_with_an_echo_and_a_subscriber_to_every_topic(graph, pro
     echo_out = tmp_path / "echo.txt"
     with open(echo_out, "wb") as out:
         echo = subprocess.Popen(
-            [sys.executable, "-m", "cpg_walker.cli.main", "topic", "echo", "/joint_states"], env=graph.env,
+            [sys.executable, "-m", "cpg_walker.cli.main", "topic", "echo", ifc.JOINT_STATES], env=graph.env,
             stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
-    watched = ("/clock", "/joint_states", "/joint_targets", "/joint_torques", "/joint_trajectory", "/imu",
-               "/odom/ground_truth")
+    watched = (ifc.CLOCK, ifc.JOINT_STATES, ifc.JOINT_TARGETS, ifc.JOINT_TORQUES, ifc.JOINT_TRAJECTORY,
+               ifc.IMU, ifc.ODOM_GROUND_TRUTH)
     try:
         counts: dict[str, int] = {}
         topics = {}
         for _ in range(20):  # every topic of the graph, as discovery reveals them
             probe.spin_for(0.25)
             for topic, types in probe.node.get_topic_names_and_types():
-                if topic not in topics and topic != "/diagnostics":
+                if topic not in topics and topic != ifc.DIAGNOSTICS:
                     counts[topic] = 0
                     topics[topic] = probe.node.create_subscription(
                         message_class(types[0]), topic,

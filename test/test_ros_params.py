@@ -16,7 +16,8 @@ import pytest
 
 from cpg_walker.graph.processes import NODES
 from cpg_walker.graph.ros2cli import from_parameter_value
-from cpg_walker.nodes.runtime import NODE_NAMES, params_file
+from cpg_walker.nodes.interface import NODE_NAMES
+from cpg_walker.nodes.params import params_file
 from cpg_walker.paths import ros_parameters
 from cpg_walker.robot.joints import JOINT_NAMES
 from cpg_walker.robot.urdf import read_urdf

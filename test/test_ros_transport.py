@@ -14,6 +14,7 @@ from types import SimpleNamespace
 import pytest
 from ros_helpers import START_S
 
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.nodes.lossy_link import LossyLink, link_error
 from cpg_walker.paths import ros_parameters
 
@@ -69,7 +70,7 @@ def test_the_relay_drops_the_set_fraction_of_each_topic(walk):
     periods = round(DURATION_S / ros_parameters("sim.yaml", "sim")["control_period"])
     for topic, s in relay.items():
         n = s["received"]
-        if topic in ("/joint_states", "/imu"):
+        if topic in (ifc.JOINT_STATES, ifc.IMU):
             assert n >= periods, (topic, s)
         assert s["dropped"] + s["forwarded"] + s["queued"] == n, (topic, s)
         # 5 standard deviations of a binomial(n, LOSS): a false failure about once in 3.5 million runs

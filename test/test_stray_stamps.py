@@ -31,7 +31,7 @@ def test_sim_refuses_a_torque_stamped_ahead_of_its_time(monkeypatch):
     from sensor_msgs.msg import JointState
 
     from cpg_walker.nodes import sim_node
-    from cpg_walker.nodes.runtime import params_file
+    from cpg_walker.nodes.params import params_file
     from cpg_walker.nodes.sim_node import SimNode
 
     contexts = []  # sim_node makes its executor in rclpy's default context: here in the node's own

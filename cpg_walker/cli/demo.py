@@ -13,7 +13,7 @@ import argparse
 from cpg_walker.cli.checks import domain_id, out_dir, positive
 from cpg_walker.cli.graph import add_foxglove_option
 from cpg_walker.cli.outcome import OK, walk_status
-from cpg_walker.nodes.runtime import PACINGS
+from cpg_walker.nodes.interface import PACINGS
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -9,7 +9,7 @@ import argparse
 from cpg_walker.cli.checks import domain_id, non_negative, out_dir, within
 from cpg_walker.cli.outcome import fall_line, report_fall
 from cpg_walker.errors import InputError
-from cpg_walker.nodes.runtime import PACINGS
+from cpg_walker.nodes.interface import PACINGS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
 ALIASES = {"sim": "sim_node", "pid": "pid_node", "cpg": "cpg_node", "player": "target_player_node",

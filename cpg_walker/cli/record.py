@@ -26,7 +26,7 @@ def recorder_argv(out: str, duration: float | None, wall_time: bool) -> list[str
     import math
 
     from cpg_walker.graph.processes import param_arg
-    from cpg_walker.nodes.runtime import params_file
+    from cpg_walker.nodes.params import params_file
 
     if duration is not None and not (duration >= 0 and math.isfinite(duration)):
         raise InputError(f"--duration must be >= 0 seconds (0: until Ctrl-C), got {duration}")

@@ -11,7 +11,7 @@ import argparse
 from cpg_walker.cli.checks import config_or_file, out_dir, positive, within
 from cpg_walker.cli.graph import add_foxglove_option
 from cpg_walker.cli.outcome import walk_status
-from cpg_walker.nodes.runtime import PACINGS
+from cpg_walker.nodes.interface import PACINGS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
 

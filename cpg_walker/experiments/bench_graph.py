@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cpg_walker.nodes.runtime import PACINGS
+from cpg_walker.nodes import interface as ifc
+from cpg_walker.nodes.interface import PACINGS
 
 
 def _node_stats(log: str) -> dict:
@@ -115,7 +116,7 @@ def per_period_costs(n: int = 1000) -> dict:
     from rclpy.executors import SingleThreadedExecutor
 
     from cpg_walker.graph.processes import random_domain_id
-    from cpg_walker.nodes.runtime import params_file
+    from cpg_walker.nodes.params import params_file
     from cpg_walker.nodes.sim_node import SimNode
 
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -270,7 +271,7 @@ def third_process_rates(window: float = 2.0, start_timeout: float = 120.0) -> di
     from cpg_walker.graph.processes import Graph
     from cpg_walker.nodes.messages import stamp_ns
 
-    topics = {"/joint_states": JointState, "/joint_torques": JointState, "/odom/ground_truth": Odometry}
+    topics = {ifc.JOINT_STATES: JointState, ifc.JOINT_TORQUES: JointState, ifc.ODOM_GROUND_TRUTH: Odometry}
     got: dict[str, list[int]] = {t: [] for t in topics}
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     with Graph(Path(tempfile.mkdtemp(prefix="bench_rates_"))) as g:
@@ -299,7 +300,7 @@ def third_process_rates(window: float = 2.0, start_timeout: float = 120.0) -> di
             ex.shutdown()
             node.destroy_node()
             rclpy.try_shutdown(context=ctx)
-    states, torques = set(got["/joint_states"]), set(got["/joint_torques"])
+    states, torques = set(got[ifc.JOINT_STATES]), set(got[ifc.JOINT_TORQUES])
     return {"window_wall_s": round(wall, 3),
             **{f"{t.strip('/').replace('/', '_')}_hz": round(len(v) / wall, 1) for t, v in got.items()},
             "states_answered_fraction": round(len(states & torques) / len(states), 4) if states else None}

@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 from cpg_walker.experiments.bench_graph import _node_stats, check_graph_run, checked
+from cpg_walker.nodes import interface as ifc
 
 #: (name, attached subscribers, CPU-bound process) of the full run; ``--quick`` runs QUICK_SCENARIOS.
 SCENARIOS = [("alone", 0, False), ("subscribers_1", 1, False), ("subscribers_3", 3, False),
@@ -41,8 +42,8 @@ NO_OS_HELP = {"realtime_priority": 0, "nice": 0, "cpu_affinity": 0}
 
 def _tools(n: int) -> list[list[str]]:
     py = sys.executable
-    cmds = [[py, "-m", "cpg_walker.cli.main", "topic", "echo", "/joint_states"],
-            [py, "-m", "cpg_walker.cli.main", "topic", "echo", "/odom/ground_truth"],
+    cmds = [[py, "-m", "cpg_walker.cli.main", "topic", "echo", ifc.JOINT_STATES],
+            [py, "-m", "cpg_walker.cli.main", "topic", "echo", ifc.ODOM_GROUND_TRUTH],
             [py, "-m", "cpg_walker.experiments.bench_realtime", "subscribe-all"]]
     return cmds[:n]
 
@@ -196,7 +197,7 @@ def per_period_cpu(n: int = 500) -> dict:
     import rclpy
 
     from cpg_walker.graph.processes import random_domain_id
-    from cpg_walker.nodes.runtime import params_file
+    from cpg_walker.nodes.params import params_file
     from cpg_walker.nodes.sim_node import SimNode
     from cpg_walker.robot.contact import sole_wrenches
 

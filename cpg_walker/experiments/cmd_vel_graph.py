@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.errors import InputError
+from cpg_walker.nodes import interface as ifc
 
 #: (name, duration s, linear.x, angular.z, settle s) after the start, then ``STOP_S`` without commands;
 #: each window's first ``settle`` s are left out of the measurement (a turn builds up over ~8 s: the
@@ -49,7 +50,6 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Bool
 
@@ -92,11 +92,10 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
                 if "cmd_vel" in v:
                     cmd_state.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, v["cmd_vel"]))
 
-    node.create_subscription(Odometry, "/odom/ground_truth", on_odom, 200)
-    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
-    node.create_subscription(Bool, "/sim/fallen", on_fallen, QoSProfile(
-        depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE))
-    pub = node.create_publisher(Twist, "/cmd_vel", 10)
+    node.create_subscription(Odometry, ifc.ODOM_GROUND_TRUTH, on_odom, 200)
+    node.create_subscription(DiagnosticArray, ifc.DIAGNOSTICS, on_diag, 50)
+    node.create_subscription(Bool, ifc.SIM_FALLEN, on_fallen, ifc.latched_qos())
+    pub = node.create_publisher(Twist, ifc.CMD_VEL, 10)
     executor = SingleThreadedExecutor(context=ctx)
     executor.add_node(node)
     sent: list[tuple[float, float, float]] = []

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from cpg_walker.errors import InputError
+from cpg_walker.nodes import interface as ifc
 
 #: (sim s, zeta, alpha, what the robot does) - the run starts at zeta = alpha = 1 (module docstring).
 DEMO_SCHEDULE: tuple[tuple[float, float, float, str], ...] = (
@@ -152,7 +153,6 @@ class GraphStatus:
         from diagnostic_msgs.msg import DiagnosticArray
         from nav_msgs.msg import Odometry
         from rclpy.executors import SingleThreadedExecutor
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Bool
@@ -162,12 +162,11 @@ class GraphStatus:
         node = rclpy.create_node("demo_status", context=ctx, start_parameter_services=False)
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(node)
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                             reliability=ReliabilityPolicy.RELIABLE)
-        node.create_subscription(Clock, "/clock", self._on_clock, 10)
-        node.create_subscription(Odometry, "/odom/ground_truth", self._on_odom, 10)
-        node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 10)
-        node.create_subscription(Bool, "/sim/fallen", lambda m: setattr(self, "fallen", bool(m.data)),
+        latched = ifc.latched_qos()
+        node.create_subscription(Clock, ifc.CLOCK, self._on_clock, 10)
+        node.create_subscription(Odometry, ifc.ODOM_GROUND_TRUTH, self._on_odom, 10)
+        node.create_subscription(DiagnosticArray, ifc.DIAGNOSTICS, self._on_diagnostics, 10)
+        node.create_subscription(Bool, ifc.SIM_FALLEN, lambda m: setattr(self, "fallen", bool(m.data)),
                                  latched)
         shown = 0.0
         try:
@@ -280,13 +279,13 @@ def summarize_recording(bag: str | Path, schedule: list, walk_report: dict | Non
     from cpg_walker.experiments.plot_bag import odometry_series
     from cpg_walker.nodes.recording import ODOM_TOPIC, read_topics
 
-    topics = read_topics(bag, [ODOM_TOPIC, "/sim/fallen"])
+    topics = read_topics(bag, [ODOM_TOPIC, ifc.SIM_FALLEN])
     odom = topics.get(ODOM_TOPIC, [])
     if len(odom) < 2:
         raise ValueError(f"{bag}: fewer than two /odom/ground_truth messages; nothing to summarise")
     s = odometry_series(odom)
     t, x, y, heading = s["t"], s["x"], s["y"], s["heading"]
-    fall = [ns / 1e9 for ns, m in topics.get("/sim/fallen", []) if m.data]
+    fall = [ns / 1e9 for ns, m in topics.get(ifc.SIM_FALLEN, []) if m.data]
     out_segments = []
     for seg in segments(schedule, float(t[-1])):
         mid = 0.5 * (seg["from_s"] + seg["to_s"])

@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from cpg_walker.errors import InputError
+from cpg_walker.nodes import interface as ifc
 
 #: Sim s of odometry the walking speed is measured over (about two strides).
 WINDOW_S = 2.0
@@ -106,7 +107,7 @@ class FaultGraph:
 
     # -------------------------------------------------------------- processes
     def params(self, node: str) -> dict:
-        lockstep = self.pacing == "lockstep"
+        lockstep = ifc.controllers_lockstep(self.pacing)
         if node == "sim_node":
             return {"pacing": self.pacing, "duration": 0.0, "stop_on_fall": False}
         if node == "pid_node":
@@ -118,7 +119,6 @@ class FaultGraph:
         import rclpy
         from nav_msgs.msg import Odometry as OdomMsg
         from rclpy.executors import SingleThreadedExecutor
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rclpy.signals import SignalHandlerOptions
         from std_msgs.msg import Bool
 
@@ -132,14 +132,13 @@ class FaultGraph:
         self._node = rclpy.create_node("faults_monitor", context=self._ctx, start_parameter_services=False)
         self._executor = SingleThreadedExecutor(context=self._ctx)
         self._executor.add_node(self._node)
-        self._node.create_subscription(OdomMsg, "/odom/ground_truth", self._on_odom, 100)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self._node.create_subscription(Bool, "/sim/fallen", self._on_fallen, latched)
+        self._node.create_subscription(OdomMsg, ifc.ODOM_GROUND_TRUTH, self._on_odom, 100)
+        latched = ifc.latched_qos()
+        self._node.create_subscription(Bool, ifc.SIM_FALLEN, self._on_fallen, latched)
         self.graph.start("pid_node", **self.params("pid_node"))
         self.graph.start("cpg_node", **self.params("cpg_node"))
         self.graph.wait_for_log("cpg_node", "CPG N=", 600.0)  # its own line (a loaded machine: minutes)
-        self.wait(lambda: self._node.count_publishers("/joint_trajectory") > 0, 300.0, "cpg_node up")
+        self.wait(lambda: self._node.count_publishers(ifc.JOINT_TRAJECTORY) > 0, 300.0, "cpg_node up")
         self.graph.start("sim_node", **self.params("sim_node"))
 
     def _on_odom(self, msg) -> None:

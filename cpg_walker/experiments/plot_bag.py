@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.nodes.recording import read_topics
 
 CPG_NODE = "/cpg"
@@ -163,10 +164,10 @@ def plot_bag(bag: str | Path, out_dir: str | Path) -> dict:
             skipped[name] = f"no messages on {', '.join(missing)}"
         return not missing
 
-    if need("targets_vs_states.png", "/joint_targets", "/joint_states"):
-        tt, targets = _joints(data["/joint_targets"], "position")
-        ts, states = _joints(data["/joint_states"], "position")
-        dofs = [d for d in cpg_dofs(data.get("/cpg/state", [])) if d in targets and d in states]
+    if need("targets_vs_states.png", ifc.JOINT_TARGETS, ifc.JOINT_STATES):
+        tt, targets = _joints(data[ifc.JOINT_TARGETS], "position")
+        ts, states = _joints(data[ifc.JOINT_STATES], "position")
+        dofs = [d for d in cpg_dofs(data.get(ifc.CPG_STATE, [])) if d in targets and d in states]
         if not dofs:
             moving = sorted((n for n in targets if n in states), key=lambda n: -np.ptp(targets[n]))
             dofs = moving[:10]
@@ -182,8 +183,8 @@ def plot_bag(bag: str | Path, out_dir: str | Path) -> dict:
         fig.suptitle("CPG joints: targets vs joint states")
         save(fig, "targets_vs_states.png")
 
-    if need("tilt.png", "/imu"):
-        imu = data["/imu"]
+    if need("tilt.png", ifc.IMU):
+        imu = data[ifc.IMU]
         tilt = np.degrees([tilt_from_quat((o.w, o.x, o.y, o.z)) for o in (m.orientation for _, m in imu)])
         fig, ax = plt.subplots(figsize=(10, 3.5))
         ax.plot(_t(imu), tilt[:, 0], lw=1.0, label="lateral roll (> 0: leaning right)")
@@ -195,10 +196,10 @@ def plot_bag(bag: str | Path, out_dir: str | Path) -> dict:
         save(fig, "tilt.png")
 
     touchdowns: dict[str, list[float]] = {}
-    if need("sole_loads.png", "/foot_load/left", "/foot_load/right"):
+    if need("sole_loads.png", ifc.FOOT_LOAD_LEFT, ifc.FOOT_LOAD_RIGHT):
         loads = {}
         for side in SIDES:
-            seen = {ns: m.wrench.force.z for ns, m in data[f"/foot_load/{side}"]}
+            seen = {ns: m.wrench.force.z for ns, m in data[ifc.foot_load_topic(side)]}
             loads[side] = seen
         stamps = sorted(set(loads["left"]) & set(loads["right"]))
         t = np.array(stamps, dtype=float) / 1e9
@@ -218,15 +219,15 @@ def plot_bag(bag: str | Path, out_dir: str | Path) -> dict:
         ax.set_title("Sole loads (/foot_load/*) and touchdowns (robot/contact.py TouchdownDetector)")
         save(fig, "sole_loads.png")
 
-    state = data.get("/cpg/state", [])
+    state = data.get(ifc.CPG_STATE, [])
     dofs = cpg_dofs(state)
-    if need("modulation.png", "/odom/ground_truth"):
-        od = odometry_series(data["/odom/ground_truth"])
+    if need("modulation.png", ifc.ODOM_GROUND_TRUTH):
+        od = odometry_series(data[ifc.ODOM_GROUND_TRUTH])
         cycle_s = 1.0
         if dofs:
             first = np.asarray(state[0][1].data).reshape(len(dofs), state[0][1].layout.dim[1].size, 3)
             cycle_s = float(1.0 / np.median(first[:, 0, 1]))
-        events, diags = data.get("/parameter_events", []), data.get("/diagnostics", [])
+        events, diags = data.get(ifc.PARAMETER_EVENTS, []), data.get(ifc.DIAGNOSTICS, [])
         fig, axes = plt.subplots(4, 1, figsize=(10, 9), sharex=True)
         axes[0].plot(od["t"], od["speed"], lw=0.6, alpha=0.5, label="forward speed")
         axes[0].plot(od["t"], _moving_average(od["t"], od["speed"], cycle_s), lw=1.5,

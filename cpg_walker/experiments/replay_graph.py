@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.graph.processes import Graph, Placement
+from cpg_walker.nodes.interface import PACINGS, controllers_lockstep
 from cpg_walker.nodes.recorder_node import NAME as RECORDER_NAME
 from cpg_walker.nodes.relay_node import consumer_remaps
-from cpg_walker.nodes.runtime import PACINGS
 
 
 def record_to_result(record):
@@ -138,7 +138,7 @@ def run_graph(
             remaps = consumer_remaps(relay)
             g.start("relay_node", **relay, **more.get("relay_node", {}))
         g.start("pid_node", remaps=remaps.get("pid_node"),
-                **{"lockstep": pacing == "lockstep", "wait_for_targets": target is not None,
+                **{"lockstep": controllers_lockstep(pacing), "wait_for_targets": target is not None,
                    **(pid_params or {}), **more.get("pid_node", {})})
         if target is not None:
             g.start(target, remaps=remaps.get(target), **(target_params or {}), **more.get(target, {}))

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from cpg_walker.errors import InputError
+from cpg_walker.nodes import interface as ifc
 
 #: The changes, cycled: ("param", zeta, alpha) or ("cmd_vel", linear.x m/s, angular.z rad/s) or ("stop",).
 PLAN: tuple[tuple, ...] = (
@@ -95,8 +96,8 @@ def run_soak(out_dir: str | Path, minutes: float = 10.0, period: float = 20.0, p
         g.start()
         node = g._node
         counters = Counters()
-        node.create_subscription(DiagnosticArray, "/diagnostics", counters.on_diagnostics, 50)
-        cmd_pub = node.create_publisher(Twist, "/cmd_vel", 10)
+        node.create_subscription(DiagnosticArray, ifc.DIAGNOSTICS, counters.on_diagnostics, 50)
+        cmd_pub = node.create_publisher(Twist, ifc.CMD_VEL, 10)
         client = node.create_client(SetParameters, "/cpg/set_parameters")
         g.wait(lambda: client.service_is_ready(), 600.0, "/cpg/set_parameters")
         g.wait_sim(period, 600.0)  # the start-up (the recording's opening steps, the hand-over)

@@ -29,6 +29,7 @@ from typing import Protocol
 
 from cpg_walker.errors import InputError
 from cpg_walker.graph.processes import Placement
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.nodes.recording import BAG_NAME
 from cpg_walker.walker.learning import cpg_defaults
 
@@ -109,7 +110,7 @@ class ParameterSchedule:
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(node)
         clock = [-1.0]
-        node.create_subscription(Clock, "/clock", lambda m: clock.__setitem__(
+        node.create_subscription(Clock, ifc.CLOCK, lambda m: clock.__setitem__(
             0, max(clock[0], m.clock.sec + m.clock.nanosec * 1e-9)), 100)
         client = node.create_client(SetParameters, "/cpg/set_parameters")
         pending = None
@@ -194,7 +195,7 @@ def run_graph_walk(
     ``relay`` holds its counters. ``placement``: where nodes run, ``node_params``: more parameter
     overrides by node executable (both: run_graph)."""
     from cpg_walker.experiments.replay_graph import run_graph
-    from cpg_walker.nodes.runtime import PACINGS
+    from cpg_walker.nodes.interface import PACINGS
     from cpg_walker.walker.learning import load_controller
 
     if pacing not in PACINGS:
@@ -247,7 +248,7 @@ def run_graph_walk(
         return []
 
     try:
-        cpg_params = {"cpg_file": cpg_file, "lockstep": pacing == "lockstep", **overrides}
+        cpg_params = {"cpg_file": cpg_file, "lockstep": ifc.controllers_lockstep(pacing), **overrides}
         run = run_graph(out, "cpg_node", cpg_params, duration=duration, pacing=pacing,
                         control_period=control_period, stop_on_fall=stop_on_fall, timeout=limit,
                         pid_params={"startup_wait": LEARN_WAIT_S} if learn_now else None, attach=attach,

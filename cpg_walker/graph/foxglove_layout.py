@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from foxglove import layouts as fl
 
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.robot.contact import SIDES
 from cpg_walker.walker.controller import DOFS
 
@@ -39,7 +40,7 @@ def layout() -> fl.Layout:
             "grid": fl.BaseRendererGridLayerSettings(instance_id="grid", label="floor", frame_id="odom",
                                                      size=10.0, divisions=20.0, visible=True),
             "hoap2": fl.BaseRendererUrdfLayerSettings(
-                instance_id="hoap2", label="HOAP-2", source_type="topic", topic="/robot_description",
+                instance_id="hoap2", label="HOAP-2", source_type="topic", topic=ifc.ROBOT_DESCRIPTION,
                 control_mode="transforms", display_mode="visual", visible=True),
         }))
     cpg = lambda field: f"/cpg/state.dofs.{{}}.{field}[0]"  # noqa: E731

@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cpg_walker.errors import InputError
-from cpg_walker.nodes.runtime import NODE_NAMES, params_file
+from cpg_walker.nodes.interface import NODE_NAMES
+from cpg_walker.nodes.params import params_file
 
 NODES = tuple(NODE_NAMES)
 #: Nodes stopped after all the others, with their own wall-s timeout: the recorder keeps listening until

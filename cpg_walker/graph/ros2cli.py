@@ -308,14 +308,9 @@ def find_topic(s: Session, topic: str, timeout: float = 10.0) -> str:
 def matching_qos(s: Session, topic: str) -> Any:
     """A QoS that receives from every publisher of ``topic`` (like ``ros2 topic echo``: reliable and
     transient-local only when all publishers are)."""
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from cpg_walker.nodes import interface
 
-    infos = s.node.get_publishers_info_by_topic(topic)
-    reliable = bool(infos) and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
-    latched = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
-    return QoSProfile(depth=100,
-                      reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+    return interface.matching_qos(s.node.get_publishers_info_by_topic(topic), depth=100)
 
 
 def to_plain(value: Any) -> Any:

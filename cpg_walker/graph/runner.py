@@ -43,7 +43,7 @@ class GraphSpec:
 
     def node_params(self) -> dict[str, dict[str, object]]:
         """Each node's start-up parameters, the overrides of its parameters file (validated: ValueError)."""
-        from cpg_walker.nodes.runtime import PACINGS
+        from cpg_walker.nodes.interface import PACINGS, controllers_lockstep
         from cpg_walker.walker.controller import modulation_error
 
         pacing, duration = self.sim_value("pacing"), self.sim_value("duration")
@@ -55,8 +55,8 @@ class GraphSpec:
         sim = {name: (float(value) if name == "duration" else value)
                for name, value in (("pacing", self.pacing), ("duration", self.duration)) if value is not None}
         out: dict[str, dict[str, object]] = {
-            "pid_node": {"lockstep": pacing == "lockstep", "wait_for_targets": True},
-            target: {"lockstep": pacing == "lockstep"} if not self.player else {},
+            "pid_node": {"lockstep": controllers_lockstep(pacing), "wait_for_targets": True},
+            target: {"lockstep": controllers_lockstep(pacing)} if not self.player else {},
             "sim_node": sim,
         }
         for name in ("zeta", "alpha"):

@@ -17,13 +17,13 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Bool, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 from trajectory_msgs.msg import JointTrajectory
 
-from cpg_walker.nodes import cpg_params
+from cpg_walker.nodes import cpg_params, specs
+from cpg_walker.nodes import interface as ifc
 from cpg_walker.nodes.messages import (
     FOOT_LOAD_FRAMES,
     IMU_FRAME,
@@ -33,36 +33,23 @@ from cpg_walker.nodes.messages import (
     stamp,
     stamp_ns,
 )
+from cpg_walker.nodes.params import by_name, declare_params
 from cpg_walker.nodes.runtime import (
     HotPath,
     Throttle,
-    bool_param,
-    declare,
-    declare_scheduling,
     exit_log,
-    float_param,
     gc_summary,
-    int_param,
     parse_cli,
     run_main,
-    str_param,
+    scheduling_request,
 )
-from cpg_walker.nodes.validation import check_finite_scalar, reason_key, to_ns, validate_imu, validate_load
+from cpg_walker.nodes.validation import reason_key, to_ns, validate_imu, validate_load
 from cpg_walker.timing import latency_summary
-from cpg_walker.walker.cmd_vel import check_twist
-from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE, modulation_error
+from cpg_walker.walker.cmd_vel import LIMIT_KEYS, CmdVelLimits, check_twist
+from cpg_walker.walker.controller import modulation_error
 from cpg_walker.walker.cpg_driver import CPGDriver, FeedbackFade
 from cpg_walker.walker.feedback import FeedbackController
 from cpg_walker.walker.learning import load_controller
-
-INTERFACE = """\
-subscribes: /clock (rosgraph_msgs/Clock), /imu (sensor_msgs/Imu), /foot_load/left and /foot_load/right
-  (geometry_msgs/WrenchStamped) - the feedback pathways' sensors, on sim time; /cmd_vel
-  (geometry_msgs/Twist; cmd_vel.*); /sim/servo_hold (std_msgs/Bool, latched: on release the gait
-  re-enters from the standing crouch)
-publishes: /joint_targets (sensor_msgs/JointState), /joint_trajectory (trajectory_msgs/JointTrajectory),
-  /cpg/state (std_msgs/Float64MultiArray), /diagnostics (diagnostic_msgs/DiagnosticArray)
-parameters: docs/reference/cpg.md"""
 
 
 def state_layout(names, n_osc: int) -> MultiArrayLayout:
@@ -76,54 +63,29 @@ def state_layout(names, n_osc: int) -> MultiArrayLayout:
     ], data_offset=0)
 
 
+#: cpg_node's parameter specs by name.
+SPEC = by_name(specs.CPG)
+
+
 class CPGNode(Node):
     """Wires parameters and topics to a CPGDriver (which also implements its output: this node).
     ``node_options`` go to rclpy's Node (``cli_args``, ``context``)."""
 
     def __init__(self, **node_options) -> None:
-        super().__init__("cpg", **node_options)
-        p = lambda name, descriptor: declare(self, name, descriptor)  # noqa: E731
-        cpg_file = p("cpg_file", str_param(
-            "learned CPG YAML (a path, or a name in the package's config/); '' = learn at start-up",
-            read_only=True))
-        n_osc = p("n_oscillators", int_param(
-            "oscillators per DOF when learning at start-up (0 = the learning settings' N)", 0, 20,
-            read_only=True))
-        zeta = p("zeta", float_param("frequency ratio ζ of the oscillators (negative: backwards)",
-                                     *ZETA_RANGE))
-        alpha = p("alpha", float_param("amplitude (step length) scale α of the oscillators", *ALPHA_RANGE))
-        for name, value in (("zeta", zeta), ("alpha", alpha)):
-            if reason := modulation_error(name, value):
+        super().__init__(ifc.NODE_NAMES[ifc.CPG_NODE], **node_options)
+        v = declare_params(self, specs.CPG)
+        for name in ("zeta", "alpha"):
+            if reason := modulation_error(name, v[name]):
                 raise ValueError(reason)
-        ro = {"read_only": True}
-        timing = {
-            "lookahead": p("lookahead", bool_param("also send the next period's target on each tick", **ro)),
-            "monitor_period_ns": round(p("monitor_period", float_param(
-                "sim s between /cpg/state and /diagnostics messages", 0.002, 60.0, **ro)) * 1e9),
-            "horizon_s": p("horizon", float_param(
-                "sim s of future targets in each /joint_trajectory (0 = none published)", 0.0, 5.0, **ro)),
-            "horizon_step_ns": round(p("horizon_step", float_param(
-                "sim s between /joint_trajectory points and between messages", 0.002, 1.0, **ro)) * 1e9),
-            "horizon_stop_s": p("horizon_stop", float_param(
-                "sim s after the horizon over which its stepping dies out (alpha -> 0): where pid_node goes "
-                "when this node is gone", 0.0, 10.0, **ro)),
-            "rejoin_settle_ns": round(p("rejoin_settle", float_param(
-                "sim s a node that joined a running sim (realtime pacing) stands by before it re-enters the "
-                "gait (pid_node holds the crouch meanwhile); lockstep re-enters at once", 0.0, 10.0,
-                **ro)) * 1e9),
-        }
-        self.scheduling = declare_scheduling(self)  # applied once started (runtime.settle_process)
-        lockstep = p("lockstep", bool_param(
-            "wait for the sensor samples stamped like each /clock tick (deterministic; with the sim's "
-            "lockstep pacing)", **ro))
-        feedback_on = p("feedback", bool_param(
-            "close the sensory feedback pathways (false: the open-loop CPG)"))
-        fb_cfg, pathways, fb_settings = cpg_params.declare_feedback(self)
-        follow, limits, speed_map = cpg_params.declare_cmd_vel(self)
-        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.state_pub = self.create_publisher(Float64MultiArray, "/cpg/state", 10)
-        self.pub = self.create_publisher(JointState, "/joint_targets", 10)
-        self.traj_pub = self.create_publisher(JointTrajectory, "/joint_trajectory", 5)
+        self.scheduling = scheduling_request(v)  # applied once started (runtime.settle_process)
+        fb_cfg, pathways = cpg_params.declare_feedback(self)
+        limits = CmdVelLimits(**{k: float(v[f"cmd_vel.{k}"]) for k in LIMIT_KEYS})
+        speed_map = cpg_params.load_speed_map(v["cmd_vel.speed_map"])
+        cpg_file, n_osc = v["cpg_file"], v["n_oscillators"]
+        self.diag_pub = self.create_publisher(DiagnosticArray, ifc.DIAGNOSTICS, ifc.DEPTH)
+        self.state_pub = self.create_publisher(Float64MultiArray, ifc.CPG_STATE, ifc.DEPTH)
+        self.pub = self.create_publisher(JointState, ifc.JOINT_TARGETS, ifc.DEPTH)
+        self.traj_pub = self.create_publisher(JointTrajectory, ifc.JOINT_TRAJECTORY, 5)
         self.throttle = Throttle(1.0)
         self.driver: CPGDriver | None = None
         if not cpg_file:
@@ -135,29 +97,31 @@ class CPGNode(Node):
             ctrl, self.origin, self.converged = load_controller(cpg_file, n_learn)
         except FileNotFoundError as exc:
             raise ValueError(str(exc)) from None
-        fade = FeedbackFade(fb_settings["feedback_fade"], fb_settings["sensor_timeout"])
         self.driver = CPGDriver(
-            ctrl, self, feedback=FeedbackController(fb_cfg, pathways), feedback_on=feedback_on, fade=fade,
-            zeta=zeta, alpha=alpha, speed_map=speed_map, cmd_vel_limits=limits, follow_cmd_vel=follow,
-            lockstep=lockstep, sensor_wait_s=fb_settings["sensor_wait"], **timing)
+            ctrl, self, feedback=FeedbackController(fb_cfg, pathways), feedback_on=v["feedback"],
+            fade=FeedbackFade(v["feedback_fade"], v["sensor_timeout"]), zeta=v["zeta"], alpha=v["alpha"],
+            speed_map=speed_map, cmd_vel_limits=limits, follow_cmd_vel=v["cmd_vel.follow"],
+            lockstep=v["lockstep"], sensor_wait_s=v["sensor_wait"], lookahead=v["lookahead"],
+            monitor_period_ns=round(v["monitor_period"] * 1e9), horizon_s=v["horizon"],
+            horizon_step_ns=round(v["horizon_step"] * 1e9), horizon_stop_s=v["horizon_stop"],
+            rejoin_settle_ns=round(v["rejoin_settle"] * 1e9))
         self.get_logger().info(f"CPG warmed up in {self.driver.warm_up():.3f} s")
         self.add_on_set_parameters_callback(self._on_set)
         self.builder = JointStateBuilder(self.driver.source.names, fields=("position", "velocity"))
         self.traj_builder: tuple[int, JointTrajectoryBuilder] | None = None  # (offsets' id, builder)
         self.state_msg = Float64MultiArray(layout=state_layout(ctrl.names, ctrl.net.N))
         self.idle = self.driver.idle  # runtime.spin_hot calls it every executor period
-        subs = [self.create_subscription(Clock, "/clock", self._on_clock, 100),
-                self.create_subscription(Imu, "/imu", self._on_imu, 100)]
+        subs = [self.create_subscription(Clock, ifc.CLOCK, self._on_clock, 100),
+                self.create_subscription(Imu, ifc.IMU, self._on_imu, 100)]
         for i, (side, frame) in enumerate(FOOT_LOAD_FRAMES):
             subs.append(self.create_subscription(
-                WrenchStamped, f"/foot_load/{side}",
+                WrenchStamped, ifc.foot_load_topic(side),
                 lambda msg, i=i, frame=frame: self._on_load(i, frame, msg), 100))
         # /cmd_vel in the hot path too: a Twist is timed by the tick it arrives at (it has no stamp), so it
         # must not wait in the executor's queue (one callback per executor_period)
-        subs.append(self.create_subscription(Twist, "/cmd_vel", self._on_cmd_vel, 10))
-        subs.append(self.create_subscription(Bool, "/sim/servo_hold", lambda msg: self.driver.servo_hold(
-            msg.data), QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                   durability=DurabilityPolicy.TRANSIENT_LOCAL)))
+        subs.append(self.create_subscription(Twist, ifc.CMD_VEL, self._on_cmd_vel, ifc.DEPTH))
+        subs.append(self.create_subscription(Bool, ifc.SIM_SERVO_HOLD, lambda msg: self.driver.servo_hold(
+            msg.data), ifc.latched_qos()))
         self.hot = HotPath(self, subs)
         self._diagnostics(0, "converged", {})
         d = self.driver
@@ -196,14 +160,14 @@ class CPGNode(Node):
         try:
             value = validate_imu(msg.header.frame_id, IMU_FRAME, (o.w, o.x, o.y, o.z), (w.x, w.y, w.z))
         except ValueError as exc:
-            return self._drop("/imu", exc)
+            return self._drop(ifc.IMU, exc)
         self.driver.sample(0, stamp_ns(msg), value)
 
     def _on_load(self, i: int, frame: str, msg: WrenchStamped) -> None:
         try:
             value = validate_load(msg.header.frame_id, frame, msg.wrench.force.z)
         except ValueError as exc:
-            return self._drop(f"/foot_load/{FOOT_LOAD_FRAMES[i][0]}", exc)
+            return self._drop(ifc.foot_load_topic(FOOT_LOAD_FRAMES[i][0]), exc)
         self.driver.sample(1 + i, stamp_ns(msg), value)
 
     def _drop(self, topic: str, exc: ValueError) -> None:
@@ -233,11 +197,11 @@ class CPGNode(Node):
                     raise ValueError(reason)
             pathways = cpg_params.pathway_list(values["feedback_pathways"]) \
                 if "feedback_pathways" in values else None
-            for name, (lo, hi) in cpg_params.FEEDBACK_RANGES.items():
+            for name in ("sensor_timeout", "feedback_fade", "sensor_wait"):
                 if name in values:
-                    check_finite_scalar(name, values[name], lo, hi)
+                    cpg_params.check_value(SPEC[name], values[name])
             fb = d.source.fb
-            fields = cpg_params.config_fields()
+            fields = cpg_params.feedback_fields()
             fb_changes = {n[9:]: v for n, v in values.items()
                           if n.startswith("feedback.") and n[9:] in fields}
             cfg = cpg_params.check_feedback(fb_changes, fb.cfg)
@@ -294,8 +258,8 @@ class CPGNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = parse_cli("cpg_node", "The learned humanoid CPG: /joint_targets on /clock, zeta/alpha modulation.",
-                     INTERFACE, argv)
+    argv = parse_cli(ifc.CPG_NODE, "The learned humanoid CPG: /joint_targets on /clock, zeta/alpha "
+                     "modulation.", ifc.help_text(ifc.CPG_NODE), argv)
     return run_main(argv, CPGNode)
 
 

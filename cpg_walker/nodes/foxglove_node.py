@@ -42,6 +42,8 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState as RosJointState
 from std_msgs.msg import Float64MultiArray
 
+from cpg_walker.nodes import interface as ifc
+from cpg_walker.nodes import specs
 from cpg_walker.nodes.foxglove_params import ParameterForwarder
 from cpg_walker.nodes.foxglove_view import (
     CONTACT_SCHEMA,
@@ -60,18 +62,14 @@ from cpg_walker.nodes.foxglove_view import (
     wrench_load,
 )
 from cpg_walker.nodes.messages import stamp_ns
+from cpg_walker.nodes.params import declare_params
 from cpg_walker.nodes.runtime import (
     HotPath,
     Throttle,
-    declare,
-    declare_scheduling,
     exit_log,
-    float_param,
-    int_param,
     parse_cli,
     run_main,
-    str_param,
-    strs_param,
+    scheduling_request,
 )
 from cpg_walker.robot.urdf import read_urdf
 
@@ -102,46 +100,38 @@ class FoxgloveNode(Node):
     """The bridge: ROS subscriptions in, Foxglove channels out; ``display()`` shows the newest state."""
 
     def __init__(self, **node_options) -> None:
-        super().__init__("foxglove", **node_options)
+        super().__init__(ifc.NODE_NAMES[ifc.FOXGLOVE_NODE], **node_options)
         if self.get_parameter("use_sim_time").value:
             # its times are the messages' stamps; sim time would subscribe /clock: a callback per tick
             from rclpy.parameter import Parameter
 
             self.set_parameters([Parameter("use_sim_time", value=False)])
-        host = str(declare(self, "host", str_param(
-            "address the WebSocket server binds to (127.0.0.1: this machine only; 0.0.0.0: every interface)",
-            read_only=True)))
-        port = int(declare(self, "port", int_param("TCP port of the WebSocket server (0 = any free port)",
-                                                   0, 65535, read_only=True)))
-        self.display_period = 1.0 / float(declare(self, "display_rate", float_param(
-            "most messages per wall second on each high-rate channel", 1.0, 500.0, read_only=True)))
-        timeout = float(declare(self, "service_timeout", float_param(
-            "wall s to wait for a node's parameter service before answering Foxglove without it", 0.1, 60.0,
-            read_only=True)))
-        targets = list(declare(self, "parameters", strs_param(
-            "parameters of other nodes shown in Foxglove's parameter panel, NODE.NAME (e.g. cpg.zeta)",
-            read_only=True)) or [])
-        self.scheduling = declare_scheduling(self)
+        v = declare_params(self, specs.FOXGLOVE)
+        host, port = str(v["host"]), int(v["port"])
+        self.display_period = 1.0 / float(v["display_rate"])
+        timeout = float(v["service_timeout"])
+        targets = list(v["parameters"] or [])
+        self.scheduling = scheduling_request(v)
         if not host:
             raise ValueError("host must not be empty (127.0.0.1: this machine only)")
 
         self.ctx = foxglove.Context()
         self.urdf = read_urdf()
-        self.ch_tf = FrameTransformsChannel("/tf", context=self.ctx)
-        self.ch_js = JointStatesChannel("/joint_states", context=self.ctx)
-        self.ch_jt = JointStatesChannel("/joint_targets", context=self.ctx)
-        self.ch_cpg = foxglove.Channel("/cpg/state", schema=CPG_STATE_SCHEMA, context=self.ctx)
-        self.ch_contact = foxglove.Channel("/contact", schema=CONTACT_SCHEMA, context=self.ctx)
-        self.ch_touchdown = foxglove.Channel("/contact/touchdown", schema=TOUCHDOWN_SCHEMA, context=self.ctx)
-        self.ch_diag = foxglove.Channel("/diagnostics", schema=DIAGNOSTICS_SCHEMA, context=self.ctx)
-        self.ch_desc = foxglove.Channel("/robot_description", schema=STRING_SCHEMA, context=self.ctx)
+        self.ch_tf = FrameTransformsChannel(ifc.TF, context=self.ctx)
+        self.ch_js = JointStatesChannel(ifc.JOINT_STATES, context=self.ctx)
+        self.ch_jt = JointStatesChannel(ifc.JOINT_TARGETS, context=self.ctx)
+        self.ch_cpg = foxglove.Channel(ifc.CPG_STATE, schema=CPG_STATE_SCHEMA, context=self.ctx)
+        self.ch_contact = foxglove.Channel(ifc.CONTACT, schema=CONTACT_SCHEMA, context=self.ctx)
+        self.ch_touchdown = foxglove.Channel(ifc.CONTACT_TOUCHDOWN, schema=TOUCHDOWN_SCHEMA, context=self.ctx)
+        self.ch_diag = foxglove.Channel(ifc.DIAGNOSTICS, schema=DIAGNOSTICS_SCHEMA, context=self.ctx)
+        self.ch_desc = foxglove.Channel(ifc.ROBOT_DESCRIPTION, schema=STRING_SCHEMA, context=self.ctx)
         self.send_description = False
 
         def subscribed(topic: str) -> None:  # an sdk thread: only a flag, the main loop sends it
-            if topic == "/robot_description":
+            if topic == ifc.ROBOT_DESCRIPTION:
                 self.send_description = True
 
-        self.params = ParameterForwarder(self, targets, {"/robot_description": self.urdf}, timeout,
+        self.params = ParameterForwarder(self, targets, {ifc.ROBOT_DESCRIPTION: self.urdf}, timeout,
                                          subscribed)
         try:
             self.server = foxglove.start_server(
@@ -163,14 +153,15 @@ class FoxgloveNode(Node):
                                        start_parameter_services=False)
         self.newest = HotPath(self.taker, [
             self.taker.create_subscription(cls, t, lambda b, t=t: self._keep(t, b), NEWEST, raw=True)
-            for cls, t in ((RosJointState, "/joint_states"), (RosJointState, "/joint_targets"),
-                           (Odometry, "/odom/ground_truth"))])
+            for cls, t in ((RosJointState, ifc.JOINT_STATES), (RosJointState, ifc.JOINT_TARGETS),
+                           (Odometry, ifc.ODOM_GROUND_TRUTH))])
         self.loads = HotPath(self.taker, [
-            self.taker.create_subscription(WrenchStamped, f"/foot_load/{s}", lambda b, s=s: self._load(s, b),
-                                           LOADS, raw=True) for s in ("left", "right")])
-        self.create_subscription(Float64MultiArray, "/cpg/state", self._cpg_state, 10)
-        self.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
-        self.create_subscription(ParameterEvent, "/parameter_events", self._parameter_event, 50)
+            self.taker.create_subscription(WrenchStamped, ifc.foot_load_topic(s),
+                                           lambda b, s=s: self._load(s, b), LOADS, raw=True)
+            for s in ifc.FOOT_LOAD_SIDES])
+        self.create_subscription(Float64MultiArray, ifc.CPG_STATE, self._cpg_state, 10)
+        self.create_subscription(DiagnosticArray, ifc.DIAGNOSTICS, self._diagnostics, 50)
+        self.create_subscription(ParameterEvent, ifc.PARAMETER_EVENTS, self._parameter_event, 50)
         self.last_cpg = 0.0
         where = ("bound to localhost only (--foxglove HOST:PORT for another interface)" if is_loopback(host)
                  else f"listening on {host}: reachable from other machines")
@@ -188,7 +179,7 @@ class FoxgloveNode(Node):
         try:
             t_ns, load = wrench_load(data)
         except (ValueError, struct.error) as exc:  # a malformed message: dropped
-            self._warn(f"/foot_load/{side}", exc)
+            self._warn(ifc.foot_load_topic(side), exc)
             return
         self.contacts.add(side, t_ns, load if math.isfinite(load) else 0.0)
 
@@ -205,7 +196,7 @@ class FoxgloveNode(Node):
             t_ns = self.newest_stamp_ns()
             self.ch_cpg.log(cpg_state(names, n_osc, msg.data, t_ns), log_time=t_ns)
         except (ValueError, TypeError) as exc:
-            self._warn("/cpg/state", exc)
+            self._warn(ifc.CPG_STATE, exc)
 
     def _diagnostics(self, msg: DiagnosticArray) -> None:
         if self.ch_diag.has_sinks():
@@ -218,7 +209,7 @@ class FoxgloveNode(Node):
             self.server.publish_parameter_values(changed)
 
     def newest_stamp_ns(self) -> int:
-        return max(self.shown.get("/joint_states", 0), self.contacts.t_ns, 0)
+        return max(self.shown.get(ifc.JOINT_STATES, 0), self.contacts.t_ns, 0)
 
     # ------------------------------------------------------------------ what the clients see
     def _joint_states(self, topic: str, channel, needed: bool = False) -> RosJointState | None:
@@ -248,8 +239,8 @@ class FoxgloveNode(Node):
         display period, and only while a client subscribes to it: nothing is taken or decoded otherwise)."""
         robot = any(c.has_sinks() for c in (self.ch_tf, self.ch_js, self.ch_jt))
         t_ns = self._show_robot() if robot else None
-        if self.contacts.t_ns > self.shown.get("/contact", -1) and self.ch_contact.has_sinks():
-            self.shown["/contact"] = self.contacts.t_ns
+        if self.contacts.t_ns > self.shown.get(ifc.CONTACT, -1) and self.ch_contact.has_sinks():
+            self.shown[ifc.CONTACT] = self.contacts.t_ns
             self.ch_contact.log(self.contacts.state(), log_time=self.contacts.t_ns)
         if self.send_description:
             self.send_description = False
@@ -261,17 +252,17 @@ class FoxgloveNode(Node):
     def _show_robot(self) -> int | None:
         """/joint_states, /joint_targets and /tf from the newest messages; the joint states' stamp."""
         self.newest.drain()  # the newest of each (depth 1); the ground truth stays until a newer one
-        js = self._joint_states("/joint_states", self.ch_js, needed=self.ch_tf.has_sinks())
-        self._joint_states("/joint_targets", self.ch_jt)
+        js = self._joint_states(ifc.JOINT_STATES, self.ch_js, needed=self.ch_tf.has_sinks())
+        self._joint_states(ifc.JOINT_TARGETS, self.ch_jt)
         if js is None:
             return None
         t_ns = stamp_ns(js)
-        odom = self.latest.get("/odom/ground_truth")
+        odom = self.latest.get(ifc.ODOM_GROUND_TRUTH)
         if odom is not None and self.ch_tf.has_sinks():
             try:
                 o = deserialize_message(odom, Odometry).pose.pose
             except Exception as exc:
-                self._warn("/odom/ground_truth", exc)
+                self._warn(ifc.ODOM_GROUND_TRUTH, exc)
                 return t_ns
             p, q = o.position, o.orientation
             poses = self.poser.transforms((p.x, p.y, p.z), (q.w, q.x, q.y, q.z),

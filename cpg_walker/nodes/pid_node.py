@@ -19,23 +19,22 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
+from cpg_walker.nodes import interface as ifc
+from cpg_walker.nodes import specs
 from cpg_walker.nodes.messages import JointStateBuilder, read_joint_command, read_joint_trajectory, stamp_ns
+from cpg_walker.nodes.params import declare_params, override_names
 from cpg_walker.nodes.runtime import (
     HotPath,
     Throttle,
-    bool_param,
-    declare,
-    declare_scheduling,
     exit_log,
-    float_param,
     gc_summary,
-    override_names,
     parse_cli,
     run_main,
+    scheduling_request,
 )
 from cpg_walker.nodes.validation import check_finite_scalar, reason_key
 from cpg_walker.robot.hoap2 import default_standing_posture
-from cpg_walker.robot.joints import GROUPS, JOINT_NAMES, MAX_TORQUE_NM
+from cpg_walker.robot.joints import JOINT_NAMES
 from cpg_walker.robot.pid import GAINS, LIMITS, PidLaw, gain_owner
 from cpg_walker.robot.trajectory import HORIZON, LIVE, SAFE, GapBridge
 from cpg_walker.timing import ActivityStats, StampGuard
@@ -50,8 +49,6 @@ parameters: kp.<group>, ki.<group>, kd.<group> for group in leg, arm, body, head
   target_timeout, safe_blend, resume_blend (sim s), lockstep, wait_for_targets, target_wait and
   startup_wait (wall s); realtime_priority, nice, cpu_affinity (OS scheduling)"""
 
-#: Upper ends of the gains' ranges (N*m/rad, N*m/(rad*s), N*m*s/rad): far above any stable HOAP-2 gain.
-GAIN_RANGES = {"kp": 2000.0, "ki": 2000.0, "kd": 200.0}
 #: Targets kept by stamp until the state of their stamp applies them (lockstep: waits for them; otherwise
 #: every one stamped up to the state's stamp is applied); past the limit the oldest half is dropped (a
 #: sim that far behind its controller has restarted).
@@ -61,35 +58,23 @@ class PidNode(Node):
     """Parameters <-> a PidLaw config; state and target callbacks; the target watchdog."""
 
     def __init__(self, **node_options) -> None:
-        super().__init__("pid", **node_options)
-        # the gains: every group's, plus per-joint overrides given at start-up (kp.lleg_joint_4 ...)
-        names = [f"{g}.{group}" for g in GAINS for group in GROUPS]
-        names += [n for g in GAINS for n in override_names(self, f"{g}.") if n not in names]
-        for name in names:
+        super().__init__(ifc.NODE_NAMES[ifc.PID_NODE], **node_options)
+        # the gains: every group's (specs.PID), plus per-joint overrides given at start-up (kp.lleg_joint_4)
+        group_gains = {spec.name for spec in specs.PID_GAINS}
+        overrides = [n for g in GAINS for n in override_names(self, f"{g}.") if n not in group_gains]
+        for name in overrides:
             gain_owner(name)  # a misspelt group or joint is an error naming it
-            gain, owner = name.split(".", 1)
-            declare(self, name, float_param(f"{gain} of the {owner} joint(s)", 0.0, GAIN_RANGES[gain]))
-        self.gain_names = names
-        declare(self, "max_torque", float_param("N*m torque clamp", 0.0, MAX_TORQUE_NM))
-        declare(self, "integral_limit", float_param("N*m anti-windup clamp", 0.0, 100.0))
-        declare(self, "max_velocity", float_param("rad/s beyond which no torque speeds a joint up further",
-                                                  0.0, 100.0))
-        self.timeout_ns = round(declare(self, "target_timeout", float_param(
-            "sim s without a target before holding the last posture", 1e-3, 1e3)) * 1e9)
-        self.lockstep = bool(declare(self, "lockstep", bool_param(
-            "answer state t_k only with the target stamped t_k", read_only=True)))
-        self.wait_targets = bool(declare(self, "wait_for_targets", bool_param(
-            "do not answer before the first target has arrived; in lockstep, wait for the target of every "
-            "period", read_only=True)))
-        self.target_wait = float(declare(self, "target_wait", float_param(
-            "lockstep: wall s to wait for a target before the watchdog trips", 1e-3, 1e3)))
-        self.startup_wait = float(declare(self, "startup_wait", float_param(
-            "lockstep: wall s to wait for the first target", 1e-3, 1e4)))
-        self.scheduling = declare_scheduling(self)  # applied once started (runtime.settle_process)
-        safe_blend = float(declare(self, "safe_blend", float_param(
-            "sim s of the C1 blend from the horizon's end to the standing crouch", 0.0, 10.0)))
-        resume_blend = float(declare(self, "resume_blend", float_param(
-            "sim s of the C1 blend back to the live targets (or to a newer horizon)", 0.0, 10.0)))
+        gains = (*specs.PID_GAINS, *(specs.gain(name) for name in overrides))
+        v = declare_params(self, (*gains, *(spec for spec in specs.PID if spec.name not in group_gains)))
+        self.gain_names = [spec.name for spec in gains]
+        self.timeout_ns = round(v["target_timeout"] * 1e9)
+        self.lockstep = bool(v["lockstep"])
+        self.wait_targets = bool(v["wait_for_targets"])
+        self.target_wait = float(v["target_wait"])
+        self.startup_wait = float(v["startup_wait"])
+        self.scheduling = scheduling_request(v)  # applied once started (runtime.settle_process)
+        safe_blend = float(v["safe_blend"])
+        resume_blend = float(v["resume_blend"])
         self.law = self._build_law({})
         self.add_on_set_parameters_callback(self._on_set)
 
@@ -112,11 +97,11 @@ class PidNode(Node):
         self.answered_ns: int | None = None
         self.pending = None  # (t_ns, q, v, wall time) waiting for its target (lockstep)
         self.b_tau = JointStateBuilder(JOINT_NAMES, fields=("effort",))
-        self.pub = self.create_publisher(JointState, "/joint_torques", 10)
-        subs = [self.create_subscription(JointState, "/joint_targets", self._on_target, 10),
-                self.create_subscription(JointState, "/joint_states", self._on_state, 10)]
+        self.pub = self.create_publisher(JointState, ifc.JOINT_TORQUES, ifc.DEPTH)
+        subs = [self.create_subscription(JointState, ifc.JOINT_TARGETS, self._on_target, ifc.DEPTH),
+                self.create_subscription(JointState, ifc.JOINT_STATES, self._on_state, ifc.DEPTH)]
         if not self.lockstep:  # lockstep answers each state with its own target: no horizon needed
-            subs.append(self.create_subscription(JointTrajectory, "/joint_trajectory",
+            subs.append(self.create_subscription(JointTrajectory, ifc.JOINT_TRAJECTORY,
                                                  self._on_trajectory, 5))
         self.activity = ActivityStats()
         self.throttle = Throttle(1.0)

@@ -19,23 +19,21 @@ from functools import partial
 from pathlib import Path
 
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from cpg_walker.errors import ToolError
+from cpg_walker.nodes import specs
+from cpg_walker.nodes.interface import NODE_NAMES, RECORDER_NODE, matching_qos
 from cpg_walker.nodes.messages import message_class
+from cpg_walker.nodes.params import declare_params
 from cpg_walker.nodes.recording import CLOCK_TOPIC, BagRecorder
 from cpg_walker.nodes.runtime import (
     HotPath,
-    declare,
-    declare_scheduling,
     exit_log,
-    float_param,
     gc_summary,
-    int_param,
     parse_cli,
+    scheduling_request,
     settle_process,
     spin_once_guarded,
-    str_param,
 )
 
 INTERFACE = """\
@@ -47,19 +45,14 @@ parameters: out_dir ('' = ./recording_<UTC date-time>), scan_period (wall s betw
   queue_depth (messages held per subscription), duration (s of bag time, then stop; 0 = until stopped)"""
 
 #: The node's name (sim_node's ``wait_for_subscriber`` names it when a graph is recorded).
-NAME = "recorder"
+NAME = NODE_NAMES[RECORDER_NODE]
 
 #: Log line that says the recorder is subscribed to the graph's topics (Graph.start waits for it).
 READY = "recording to"
 
 
-def subscription_qos(infos: list, depth: int) -> QoSProfile:
-    """A QoS that receives from every publisher in ``infos`` (their TopicEndpointInfo)."""
-    reliable = bool(infos) and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
-    latched = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
-    return QoSProfile(depth=depth,
-                      reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+#: A QoS that receives from every publisher in ``infos`` (their TopicEndpointInfo): interface.matching_qos.
+subscription_qos = matching_qos
 
 
 class RecorderNode(Node):
@@ -67,16 +60,12 @@ class RecorderNode(Node):
 
     def __init__(self, **node_options) -> None:
         super().__init__(NAME, **node_options)
-        out_dir = str(declare(self, "out_dir", str_param(
-            "directory of the bag (recording.mcap + metadata.yaml); '' = ./recording_<UTC date-time>",
-            read_only=True)))
-        self.scan_period = float(declare(self, "scan_period", float_param(
-            "wall s between scans of the graph for new topics", 0.01, 60.0, read_only=True)))
-        self.depth = int(declare(self, "queue_depth", int_param(
-            "messages held per subscription until the recorder takes them", 1, 1_000_000, read_only=True)))
-        self.duration_ns = round(float(declare(self, "duration", float_param(
-            "s of bag time to record, then stop (0 = until stopped)", 0.0, 1e9, read_only=True))) * 1e9)
-        self.scheduling = declare_scheduling(self)  # applied once started (runtime.settle_process)
+        v = declare_params(self, specs.RECORDER)
+        out_dir = str(v["out_dir"])
+        self.scan_period = float(v["scan_period"])
+        self.depth = int(v["queue_depth"])
+        self.duration_ns = round(float(v["duration"]) * 1e9)
+        self.scheduling = scheduling_request(v)  # applied once started (runtime.settle_process)
         sim_time = bool(self.get_parameter("use_sim_time").value)
         out = Path(out_dir) if out_dir else Path.cwd() / time.strftime("recording_%Y_%m_%d-%H_%M_%S",
                                                                           time.gmtime())

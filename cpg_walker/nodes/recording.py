@@ -28,13 +28,14 @@ from pathlib import Path
 from typing import Any
 
 from cpg_walker.errors import InputError
+from cpg_walker.nodes import interface as ifc
 
 #: File name (without suffix) of the bag in its directory: DIR/recording.mcap + DIR/metadata.yaml.
 BAG_NAME = "recording"
-CLOCK_TOPIC = "/clock"
-ODOM_TOPIC = "/odom/ground_truth"
-JOINT_STATES_TOPIC = "/joint_states"
-TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"
+CLOCK_TOPIC = ifc.CLOCK
+ODOM_TOPIC = ifc.ODOM_GROUND_TRUTH
+JOINT_STATES_TOPIC = ifc.JOINT_STATES
+TF_TOPIC, TF_STATIC_TOPIC = ifc.TF, ifc.TF_STATIC
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 #: A stamp this far ahead of the newest /clock is a wall-clock one, not sim time (1 s).
 WALL_STAMP_AHEAD_NS = 1_000_000_000

@@ -25,21 +25,29 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
-from cpg_walker.nodes.lossy_link import MAX_DELAY_S, MAX_JITTER_S, LossyLink, link_error
+from cpg_walker.nodes import specs
+from cpg_walker.nodes.interface import (
+    CPG_NODE,
+    DEPTH,
+    DIAGNOSTICS,
+    IMU,
+    JOINT_STATES,
+    JOINT_TARGETS,
+    NODE_NAMES,
+    PID_NODE,
+    RELAY_NODE,
+)
+from cpg_walker.nodes.lossy_link import LossyLink, link_error
 from cpg_walker.nodes.messages import message_class
+from cpg_walker.nodes.params import declare_params
 from cpg_walker.nodes.runtime import (
     HotPath,
-    declare,
-    declare_scheduling,
     exit_log,
-    float_param,
     gc_summary,
-    int_param,
     parse_cli,
     run_main,
+    scheduling_request,
     spin_once_guarded,
-    str_param,
-    strs_param,
 )
 
 INTERFACE = """\
@@ -51,10 +59,10 @@ parameters: topics, types, prefix (e.g. /net), loss (fraction 0-1), delay (wall 
   diagnostics_period (wall s); loss, delay and jitter settable at run time"""
 
 #: The node's name (config/relay.yaml).
-NAME = "relay"
+NAME = NODE_NAMES[RELAY_NODE]
 #: Subscriptions of the consumers that a relay may sit in front of, by node executable (only subscribers
 #: are remapped: the publishers keep the plain topic the relay listens to).
-CONSUMERS = {"pid_node": ("/joint_targets", "/joint_states"), "cpg_node": ("/imu",)}
+CONSUMERS = {PID_NODE: (JOINT_TARGETS, JOINT_STATES), CPG_NODE: (IMU,)}
 #: Wall s between runs of the executor (parameters, services) and between diagnostics checks.
 SLOW_SPIN_S = 0.02
 
@@ -78,21 +86,13 @@ class RelayNode(Node):
         from rclpy.qos import QoSProfile
 
         super().__init__(NAME, **node_options)
-        topics = list(declare(self, "topics", strs_param("topics to relay", read_only=True)))
-        types = list(declare(self, "types", strs_param("their message types (pkg/msg/Type), one per topic",
-                                                       read_only=True)))
-        self.prefix = str(declare(self, "prefix", str_param(
-            "output topic = prefix + input topic (e.g. /net)", read_only=True)))
-        loss = declare(self, "loss", float_param("fraction of messages dropped", 0.0, 1.0))
-        delay = declare(self, "delay", float_param("wall s each message is held", 0.0, MAX_DELAY_S))
-        jitter = declare(self, "jitter", float_param("wall s: plus U(0, jitter)", 0.0, MAX_JITTER_S))
-        seed = int(declare(self, "seed", int_param("seed of the drops' and jitter's RNG", 0, 2**31 - 1,
-                                                   read_only=True)))
-        depth = int(declare(self, "queue_depth", int_param("history of each subscription and publisher",
-                                                           1, 100_000, read_only=True)))
-        self.diag_period = float(declare(self, "diagnostics_period", float_param(
-            "wall s between /diagnostics messages (while messages flow)", 0.05, 100.0, read_only=True)))
-        self.scheduling = declare_scheduling(self)  # applied once started (runtime.settle_process)
+        v = declare_params(self, specs.RELAY)
+        topics, types = list(v["topics"]), list(v["types"])
+        self.prefix = str(v["prefix"])
+        loss, delay, jitter = v["loss"], v["delay"], v["jitter"]
+        seed, depth = int(v["seed"]), int(v["queue_depth"])
+        self.diag_period = float(v["diagnostics_period"])
+        self.scheduling = scheduling_request(v)  # applied once started (runtime.settle_process)
         if len(topics) != len(types) or not topics:
             raise ValueError(f"topics ({len(topics)}) and types ({len(types)}) must be non-empty lists of "
                              "the same length")
@@ -111,7 +111,7 @@ class RelayNode(Node):
             self.pubs[topic] = self.create_publisher(cls, self.prefix + topic, qos)
             subs.append(self.create_subscription(cls, topic, partial(self._on_message, topic), qos, raw=True))
         self.hot = HotPath(self, subs)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, DEPTH)
         self._diag_received = 0
         self.add_on_set_parameters_callback(self._on_set)
         self.get_logger().info(f"relaying {', '.join(topics)} to {self.prefix}/...: {self._settings()}")

@@ -5,21 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable
-from pathlib import Path
 from typing import TYPE_CHECKING
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from cpg_walker.nodes.interface import NODE_NAMES
+from cpg_walker.nodes.params import SCHEDULING, declare_params
 
-from cpg_walker.paths import config_path
-
-if TYPE_CHECKING:  # rclpy itself is imported where it is used: the CLI imports PACINGS from here
+if TYPE_CHECKING:  # rclpy itself is imported where it is used
     from rclpy.node import Node
 
-#: sim_node's pacings: wall-clock schedule, as fast as possible, or one period per controller answer.
-PACINGS = ("realtime", "fast", "lockstep")
-#: Each node executable's ROS node name; its parameters are config/<node name>.yaml (``params_file``).
-NODE_NAMES = {"sim_node": "sim", "pid_node": "pid", "target_player_node": "target_player", "cpg_node": "cpg",
-              "recorder_node": "recorder", "foxglove_node": "foxglove", "relay_node": "relay"}
 
 
 def parse_cli(prog: str, description: str, interface: str, argv: list[str] | None = None) -> list[str]:
@@ -105,20 +98,19 @@ class GcPauses:
 
 
 def declare_scheduling(node: Node) -> dict:
-    """Declare the OS scheduling parameters of a control node (values in its parameters file):
-    ``realtime_priority`` (SCHED_FIFO priority 1-99; 0 = none), ``nice`` (used when no real-time
-    priority is set or allowed; 0 = leave) and ``cpu_affinity`` (a taskset-style bit mask; 0 = any CPU).
-    Returns them (the mask as CPU numbers); ``apply_scheduling`` acts on them once the node has started."""
-    prio = declare(node, "realtime_priority", int_param(
-        "SCHED_FIFO priority (1-99) of the node's loop and middleware threads once started; 0 = normal "
-        "scheduling. Needs root or CAP_SYS_NICE, else the nice value is tried", 0, 99, read_only=True))
-    nice = declare(node, "nice", int_param(
-        "niceness (-20..19) when no real-time priority is set or permitted; 0 = leave as started", -20, 19,
-        read_only=True))
-    mask = declare(node, "cpu_affinity", int_param(
-        "CPUs the node's threads may run on, as a bit mask like taskset's (1 = CPU 0, 2 = CPU 1, 3 = both); "
-        "0 = any", 0, 2**63 - 1, read_only=True))
-    return {"realtime_priority": int(prio), "nice": int(nice), "cpu_affinity": cpus_of_mask(int(mask))}
+    """Declare the OS scheduling parameters of a control node (values in its parameters file; specs:
+    params.SCHEDULING): ``realtime_priority`` (SCHED_FIFO priority 1-99; 0 = none), ``nice`` (used when no
+    real-time priority is set or allowed; 0 = leave) and ``cpu_affinity`` (a taskset-style bit mask; 0 =
+    any CPU). Returns them as ``scheduling_request`` does; ``apply_scheduling`` acts on them once the node
+    has started."""
+    return scheduling_request(declare_params(node, SCHEDULING))
+
+
+def scheduling_request(values: dict) -> dict:
+    """The scheduling parameters among declared ``values`` as ``apply_scheduling`` takes them (the mask as
+    CPU numbers)."""
+    return {"realtime_priority": int(values["realtime_priority"]), "nice": int(values["nice"]),
+            "cpu_affinity": cpus_of_mask(int(values["cpu_affinity"]))}
 
 
 def cpus_of_mask(mask: int) -> list[int]:
@@ -344,113 +336,3 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
         except RCLError:  # rclpy's signal handler shut the context down in between (seen on SIGINT)
             pass
     return status
-
-
-def _typed(description: str, ptype: int, read_only: bool) -> ParameterDescriptor:
-    return ParameterDescriptor(description=description, read_only=read_only, type=ptype)
-
-
-def float_param(description: str, lo: float | None = None, hi: float | None = None,
-                read_only: bool = False) -> ParameterDescriptor:
-    """A double parameter, in [lo, hi] when both are given."""
-    d = _typed(description, ParameterType.PARAMETER_DOUBLE, read_only)
-    if lo is not None and hi is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
-    return d
-
-
-def int_param(description: str, lo: int, hi: int, read_only: bool = False) -> ParameterDescriptor:
-    """An integer parameter in [lo, hi]."""
-    d = _typed(description, ParameterType.PARAMETER_INTEGER, read_only)
-    d.integer_range = [IntegerRange(from_value=lo, to_value=hi, step=1)]
-    return d
-
-
-def bool_param(description: str, read_only: bool = False) -> ParameterDescriptor:
-    return _typed(description, ParameterType.PARAMETER_BOOL, read_only)
-
-
-def str_param(description: str, read_only: bool = False) -> ParameterDescriptor:
-    return _typed(description, ParameterType.PARAMETER_STRING, read_only)
-
-
-def floats_param(description: str, read_only: bool = False) -> ParameterDescriptor:
-    return _typed(description, ParameterType.PARAMETER_DOUBLE_ARRAY, read_only)
-
-
-def strs_param(description: str, read_only: bool = False) -> ParameterDescriptor:
-    return _typed(description, ParameterType.PARAMETER_STRING_ARRAY, read_only)
-
-
-def declare(node: Node, name: str, descriptor: ParameterDescriptor) -> object:
-    """Declare ``name`` with the descriptor's type and return its value. The value has one home, the
-    node's parameters file config/<node name>.yaml: passed with ``--params-file`` (or a ``-p`` override),
-    or, when the node was started without a value for it (a bare ``ros2 run``), read from the packaged
-    copy of that file. No value in either: a ValueError naming the parameter and the file."""
-    from rclpy.exceptions import ParameterUninitializedException
-    from rclpy.parameter import Parameter
-
-    name_refusals(node)
-    packaged = packaged_parameters(node)
-    if name in packaged and name not in node._parameter_overrides:
-        node.declare_parameter(name, packaged[name], descriptor)
-        if not getattr(node, "_packaged_params_logged", False):
-            node._packaged_params_logged = True
-            node.get_logger().info(f"parameters not given on the command line are read from "
-                                   f"{params_file(node.get_name())}")
-    else:
-        node.declare_parameter(name, Parameter.Type(descriptor.type), descriptor)
-    try:
-        return node.get_parameter(name).value
-    except ParameterUninitializedException:
-        raise ValueError(f"parameter {name!r} of /{node.get_name()} has no value: start the node with "
-                         f"--ros-args --params-file {params_file(node.get_name())}") from None
-
-
-def name_refusals(node: Node) -> None:
-    """Make every refused parameter change say which parameter it refused: rclpy's own checks answer a
-    wrong type ("Wrong parameter type, expected ...") or an undeclare without the name, so a client setting
-    several at once could not tell which. Wraps the node's ``set_parameters_atomically`` (what the
-    set_parameters services call), once; reasons that already name the parameter are kept as they are."""
-    if getattr(node, "_refusals_named", False):
-        return
-    node._refusals_named = True
-    plain = node.set_parameters_atomically
-
-    def set_parameters_atomically(parameters):
-        result = plain(parameters)
-        if not result.successful:
-            names = [p.name for p in parameters if p.name not in result.reason]
-            if len(names) == len(parameters):  # none named yet
-                result.reason = f"{', '.join(names)}: {result.reason or 'refused'}"
-        return result
-
-    node.set_parameters_atomically = set_parameters_atomically
-
-
-def packaged_parameters(node: Node) -> dict:
-    """The ros__parameters of the node's packaged parameters file (empty if there is none), cached."""
-    cached = getattr(node, "_packaged_params", None)
-    if cached is None:
-        from cpg_walker.paths import ros_parameters
-
-        try:
-            cached = ros_parameters(params_file(node.get_name()), node.get_name())
-        except FileNotFoundError:
-            cached = {}
-        node._packaged_params = cached
-    return cached
-
-
-def params_file(node_name: str) -> Path:
-    """The parameters file of the node named ``node_name``: config/<node_name>.yaml (in the package's share
-    directory); FileNotFoundError if there is none."""
-    return config_path(f"{node_name}.yaml")
-
-
-def override_names(node: Node, prefix: str) -> list[str]:
-    """Names under ``prefix`` (``kp.``) the node was started with (params file or ``-p``): for parameter
-    sets that are open-ended (pid_node's per-joint gains). rclpy keeps the start-up overrides in
-    ``Node._parameter_overrides`` and, unlike rclcpp (``NodeOptions::parameter_overrides``), has no public
-    accessor."""
-    return sorted(n for n in node._parameter_overrides if n.startswith(prefix))

@@ -24,12 +24,13 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Bool, String
 from std_srvs.srv import Trigger
 
+from cpg_walker.nodes import interface as ifc
+from cpg_walker.nodes import specs
 from cpg_walker.nodes.messages import (
     FOOT_LOAD_FRAMES,
     IMU_FRAME,
@@ -42,21 +43,16 @@ from cpg_walker.nodes.messages import (
     stamp_ns,
     transform_stamped,
 )
+from cpg_walker.nodes.params import declare_params
 from cpg_walker.nodes.runtime import (
-    PACINGS,
     HotPath,
     Throttle,
-    bool_param,
-    declare,
-    declare_scheduling,
     exit_log,
-    float_param,
-    floats_param,
     gc_summary,
     parse_cli,
     run_main,
+    scheduling_request,
     spin_once_guarded,
-    str_param,
 )
 from cpg_walker.nodes.validation import check_finite_scalar, period_ns, reason_key
 from cpg_walker.robot.contact import sole_wrenches
@@ -108,61 +104,33 @@ class SimNode(Node):
     go to rclpy's Node (e.g. ``cli_args=["--ros-args", "--params-file", ...]``, ``context``)."""
 
     def __init__(self, **node_options) -> None:
-        super().__init__("sim", **node_options)
+        super().__init__(ifc.NODE_NAMES[ifc.SIM_NODE], **node_options)
         self.sim = Hoap2Sim()
 
-        def p(name, descriptor):
-            return declare(self, name, descriptor)
-
-        self.pacing = p("pacing", str_param("realtime | fast | lockstep", read_only=True))
-        if self.pacing not in PACINGS:
-            raise ValueError(f"pacing must be one of {PACINGS}, got {self.pacing!r}")
-        self.period_ns = period_ns(p("control_period", float_param(
-            "s between state samples / torque updates (multiple of the physics timestep)", 1e-4, 0.1,
-            read_only=True)))
+        v = declare_params(self, specs.SIM)
+        self.pacing = v["pacing"]
+        if self.pacing not in ifc.PACINGS:
+            raise ValueError(f"pacing must be one of {ifc.PACINGS}, got {self.pacing!r}")
+        self.period_ns = period_ns(v["control_period"])
         n = self.period_ns / (self.sim.dt * 1e9)
         if abs(n - round(n)) > 1e-6 or round(n) < 1:
             raise ValueError(f"control_period must be a multiple of the physics timestep {self.sim.dt}")
         self.steps_per_period = round(n)
-        self.rtf_target = float(p("real_time_factor", float_param("target sim/wall speed in realtime pacing",
-                                                                  0.01, 100.0)))
-        self.duration_ns = round(p("duration", float_param("sim s to run, then exit (0 = until stopped)",
-                                                           0.0, 1e6, read_only=True)) * 1e9)
-        describe = bool(p("publish_description", bool_param(
-            "publish the URDF on /robot_description (off when robot_state_publisher does)", read_only=True)))
-        self.stop_on_fall = bool(p("stop_on_fall", bool_param("exit when the robot has fallen",
-                                                               read_only=True)))
-        self.wait_first = bool(p("wait_for_controller", bool_param(
-            "hold the first period until a torque arrives (every pacing)", read_only=True)))
-        self.wait_subscriber = str(p("wait_for_subscriber", str_param(
-            "hold the first state until this node (e.g. recorder) subscribes to every state topic "
-            "('' = do not wait)", read_only=True)))
-        self.resend_s = float(p("lockstep_resend", float_param(
-            "wall s without an answer before the state is re-sent", 0.001, 10.0)))
-        self.late_wait_s = float(p("late_torque_wait", float_param(
-            "realtime: wall s past a period's deadline to wait for a torque at most max_torque_age old "
-            "before going on with the held one (0 = never wait)", 0.0, 10.0)))
-        self.max_age_ns = round(p("max_torque_age", float_param(
-            "realtime: sim s a torque may be old and still drive a period without waiting", 0.0, 1.0,
-            read_only=True)) * 1e9)
-        self.servo = ServoHold(float(p("servo_hold_after", float_param(
-            "sim s a torque may be old before the servos hold their posture by themselves (a lost "
-            "controller); 0 = never", 0.0, 10.0,
-            read_only=True))))
-        odom = p("odom_period", float_param("sim s between ground-truth odometry messages", 0.0, 10.0,
-                                            read_only=True))
-        diag = p("diagnostics_period", float_param("sim s between /diagnostics messages", 0.01, 100.0,
-                                                   read_only=True))
-        floor = float(p("imu_variance_floor", float_param(
-            "diagonal IMU variance when the model's sensor noise is 0", 0.0, 1.0, read_only=True)))
-        p("push.force", floats_param("world-frame force (N) of ~/push"))
-        p("push.body", str_param("MJCF body name ~/push acts on (at its CoM)"))
-        p("push.duration", float_param("s of sim time ~/push lasts", 1e-4, 10.0))
-        self.record_path = p("record_path", str_param("write a JSON run record here on exit ('' = none)",
-                                                      read_only=True))
-        record_period = p("record_period", float_param("sim s between recorded samples", 1e-3, 1.0,
-                                                       read_only=True))
-        scheduling = declare_scheduling(self)  # applied once started (runtime.settle_process) ...
+        self.rtf_target = float(v["real_time_factor"])
+        self.duration_ns = round(v["duration"] * 1e9)
+        describe = bool(v["publish_description"])
+        self.stop_on_fall = bool(v["stop_on_fall"])
+        self.wait_first = bool(v["wait_for_controller"])
+        self.wait_subscriber = str(v["wait_for_subscriber"])
+        self.resend_s = float(v["lockstep_resend"])
+        self.late_wait_s = float(v["late_torque_wait"])
+        self.max_age_ns = round(v["max_torque_age"] * 1e9)
+        self.servo = ServoHold(float(v["servo_hold_after"]))
+        odom, diag = v["odom_period"], v["diagnostics_period"]
+        floor = float(v["imu_variance_floor"])
+        self.record_path = v["record_path"]
+        record_period = v["record_period"]
+        scheduling = scheduling_request(v)  # applied once started (runtime.settle_process) ...
         if self.pacing != "realtime":  # ... and only with a wall-clock schedule to keep
             scheduling.update(realtime_priority=0, nice=0)
         self.scheduling = scheduling
@@ -179,24 +147,23 @@ class SimNode(Node):
         self.throttle = Throttle(1.0)
         self.add_on_set_parameters_callback(self._on_set)
 
-        self.pub_clock = self.create_publisher(Clock, "/clock", 10)
-        self.pub_js = self.create_publisher(JointState, "/joint_states", 10)
-        self.pub_imu = self.create_publisher(Imu, "/imu", 10)
-        self.pub_feet = [self.create_publisher(WrenchStamped, f"/foot_load/{s}", 10)
+        self.pub_clock = self.create_publisher(Clock, ifc.CLOCK, ifc.DEPTH)
+        self.pub_js = self.create_publisher(JointState, ifc.JOINT_STATES, ifc.DEPTH)
+        self.pub_imu = self.create_publisher(Imu, ifc.IMU, ifc.DEPTH)
+        self.pub_feet = [self.create_publisher(WrenchStamped, ifc.foot_load_topic(s), ifc.DEPTH)
                          for s, _ in FOOT_LOAD_FRAMES]
-        self.pub_odom = self.create_publisher(Odometry, "/odom/ground_truth", 10)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.pub_fallen = self.create_publisher(Bool, "/sim/fallen", latched)
-        self.pub_hold = self.create_publisher(Bool, "/sim/servo_hold", latched)  # on each change
+        self.pub_odom = self.create_publisher(Odometry, ifc.ODOM_GROUND_TRUTH, ifc.DEPTH)
+        latched = ifc.latched_qos()
+        self.pub_fallen = self.create_publisher(Bool, ifc.SIM_FALLEN, latched)
+        self.pub_hold = self.create_publisher(Bool, ifc.SIM_SERVO_HOLD, latched)  # on each change
         self.pub_hold.publish(Bool(data=False))
-        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, ifc.DIAGNOSTICS, ifc.DEPTH)
         if describe:  # once: transient local hands it to subscribers that join later
-            self.pub_description = self.create_publisher(String, "/robot_description", latched)
+            self.pub_description = self.create_publisher(String, ifc.ROBOT_DESCRIPTION, latched)
             self.pub_description.publish(String(data=read_urdf()))
-        self.pub_tf = None if TFMessage is None else self.create_publisher(TFMessage, "/tf", 100)
-        self.hot = HotPath(self, [self.create_subscription(JointState, "/joint_torques",
-                                                           self._on_torque, 10)])
+        self.pub_tf = None if TFMessage is None else self.create_publisher(TFMessage, ifc.TF, 100)
+        self.hot = HotPath(self, [self.create_subscription(JointState, ifc.JOINT_TORQUES,
+                                                           self._on_torque, ifc.DEPTH)])
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(Trigger, "~/push", self._on_push)
 
@@ -477,7 +444,7 @@ class SimNode(Node):
         return False
 
     def run(self) -> None:
-        lockstep, realtime = self.pacing == "lockstep", self.pacing == "realtime"
+        lockstep, realtime = self.pacing == ifc.LOCKSTEP, self.pacing == "realtime"
         if self.wait_subscriber and not self._wait_for_subscriber():
             return
         self.get_logger().info(

@@ -13,16 +13,15 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
+from cpg_walker.nodes import interface as ifc
+from cpg_walker.nodes import specs
 from cpg_walker.nodes.messages import JointStateBuilder
+from cpg_walker.nodes.params import declare_params
 from cpg_walker.nodes.runtime import (
     HotPath,
-    bool_param,
-    declare,
     exit_log,
-    float_param,
     parse_cli,
     run_main,
-    str_param,
 )
 from cpg_walker.nodes.validation import to_ns
 from cpg_walker.robot.gait_data import Cycle, GaitPlayback, find_steady_cycle, load_gait
@@ -40,15 +39,10 @@ class TargetPlayerNode(Node):
     """Plays a recording (GaitPlayback) on /clock. ``node_options`` go to rclpy's Node."""
 
     def __init__(self, **node_options) -> None:
-        super().__init__("target_player", **node_options)
-        gait = declare(self, "gait", str_param("packaged recording: walk or slow", read_only=True))
-        data = declare(self, "data", str_param("a CSV in the packaged layout (overrides gait)",
-                                               read_only=True))
-        start = declare(self, "start_time", float_param("sim s at which the recording starts", 0.0, 1e6,
-                                                        read_only=True))
-        self.lookahead = bool(declare(self, "lookahead", bool_param(
-            "also send the next period's target on each tick (period from the last two ticks)",
-            read_only=True)))
+        super().__init__(ifc.NODE_NAMES[ifc.PLAYER_NODE], **node_options)
+        v = declare_params(self, specs.TARGET_PLAYER)
+        gait, data, start = v["gait"], v["data"], v["start_time"]
+        self.lookahead = bool(v["lookahead"])
         gait = load_gait(data or gait)
         try:
             cycle = find_steady_cycle(gait)
@@ -59,9 +53,9 @@ class TargetPlayerNode(Node):
         self.last_tick_ns: int | None = None
         self.sent_ns: int | None = None
         self.builder = JointStateBuilder(self.playback.names, fields=("position", "velocity"))
-        self.pub = self.create_publisher(JointState, "/joint_targets", 10)
+        self.pub = self.create_publisher(JointState, ifc.JOINT_TARGETS, ifc.DEPTH)
         self.activity = ActivityStats()
-        self.hot = HotPath(self, [self.create_subscription(Clock, "/clock", self._on_clock, 100)])
+        self.hot = HotPath(self, [self.create_subscription(Clock, ifc.CLOCK, self._on_clock, 100)])
         self.get_logger().info(f"playing {gait.name} ({gait.duration:.2f} s, then its "
                                f"{cycle.period:.3f} s cycle) from sim time {self.start_ns / 1e9} s")
 
