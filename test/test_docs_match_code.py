@@ -9,7 +9,8 @@ NODE:NAME=``; the parameters of the parameter tables, of the "Parameters ..." pa
 lists (the names outside parentheses: inside are values and remarks) and of "parameter(s) `a`, `b`";
 frames after "frame(s)"/"child", both ends of "`a` -> `b`" when one is a frame, and the frame-names
 paragraph. ROS_INTERFACE.md's node table and per-node topic tables are checked row by row against each
-node's own publishers and subscriptions, both ways.
+node's own publishers and subscriptions, both ways, and the README's Mermaid graph must name every topic a
+node publishes or subscribes (test_readme.py checks the same from the source, without ROS).
 
 What is read from the code: every node class built in-process (one rclpy context on the test's own
 domain; sim_node loads MuJoCo, cpg_node its learned CPG: ~8 s in all), from its packaged parameters file:
@@ -466,6 +467,19 @@ def test_node_sections_topic_tables_match_the_node(real):
                                 f"{'subscription' if sub else 'publisher'} {t}")
     assert nodes >= {"sim", "cpg"}
     assert not problems, "\n".join(problems)
+
+
+@pytest.mark.ros
+def test_readme_graph_names_every_topic_of_the_nodes(real):
+    """The README's Mermaid node graph names every topic the built nodes publish or subscribe (their real
+    endpoints, relay_node's /net/... included; /rosout is rcl's), and nothing that is not one of ours."""
+    from test_readme import graph_topics
+
+    said = graph_topics((REPO / "README.md").read_text(encoding="utf-8"))
+    have = set().union(*real.pubs.values(), *real.subs.values()) - {"/rosout"}
+    assert not have - said, f"README.md's graph lacks {sorted(have - said)}"
+    names = real.names()
+    assert not {t for t in said if not allowed(t) and t not in names}, sorted(said - names)
 
 
 def test_the_allow_list_is_used():
