@@ -241,11 +241,22 @@ def test_bench_from_json_names_what_is_wrong(capsys, place, text, needle):
     assert not Path(place["out"]).exists()  # nothing written
 
 
-def test_bench_readme_without_the_block_fails_before_the_benchmarks(capsys, place):
-    readme = Path(place["tmp"]) / "README.md"
-    readme.write_text("# no generated block\n")
-    one_line_error(capsys, ["bench", "--out", place["out"], "--only", "cpg", "--quick", "--readme",
-                            str(readme)], "no '<!-- bench-table:begin")
+@pytest.mark.parametrize("option", ["--doc", "--readme"])  # --readme: the former name
+def test_bench_doc_without_the_block_fails_before_the_benchmarks(capsys, place, option):
+    doc = Path(place["tmp"]) / "benchmarks.md"
+    doc.write_text("# no generated block\n")
+    one_line_error(capsys, ["bench", "--out", place["out"], "--only", "cpg", "--quick", option, str(doc)],
+                   "no '<!-- bench-table:begin")
+
+
+def test_results_docs_without_the_blocks_fails_before_any_run(capsys, place):
+    """--docs ROOT: each block's doc (readme_blocks.BLOCKS) under ROOT is checked before anything runs."""
+    one_line_error(capsys, ["results", "--out", place["out"], "--only", "headline", "--docs", place["tmp"]],
+                   "README.md")
+    Path(place["tmp"], "README.md").write_text("# no generated block\n")
+    one_line_error(capsys, ["results", "--out", place["out"], "--only", "headline", "--docs", place["tmp"]],
+                   "no '<!-- results-table:begin")
+    assert not Path(place["out"]).exists()  # nothing run
 
 
 @settings(max_examples=15, deadline=None)

@@ -1,5 +1,5 @@
-"""The docs agree with the code: every ROS topic, node parameter and TF frame that README.md and docs/*.md
-name exists in the nodes.
+"""The docs agree with the code: every ROS topic, node parameter and TF frame that README.md, CHANGELOG.md
+and docs/*.md name exists in the nodes.
 
 What is read from the docs (``Doc``): inline code spans (also across a line break) and fenced code
 blocks; in them, topic-like names (``/a/b``, ``/foot_load/*``, ``/foot_load/{left,right}``; filesystem
@@ -8,8 +8,9 @@ paths and file names left out), ``/NODE.NAME`` (a parameter as Foxglove names it
 NODE:NAME=``; the parameters of the parameter tables, of the "Parameters ..." paragraphs and their bullet
 lists (the names outside parentheses: inside are values and remarks) and of "parameter(s) `a`, `b`";
 frames after "frame(s)"/"child", both ends of "`a` -> `b`" when one is a frame, and the frame-names
-paragraph. The README's node table and the per-node topic tables of ROS_INTERFACE.md are checked row by
-row against each node's own publishers and subscriptions, both ways.
+paragraph. ROS_INTERFACE.md's node table and per-node topic tables are checked row by row against each
+node's own publishers and subscriptions, both ways, and the README's Mermaid graph must name every topic a
+node publishes or subscribes (test_readme.py checks the same from the source, without ROS).
 
 What is read from the code: every node class built in-process (one rclpy context on the test's own
 domain; sim_node loads MuJoCo, cpg_node its learned CPG: ~8 s in all), from its packaged parameters file:
@@ -30,7 +31,10 @@ import pytest
 from cpg_walker.nodes import interface as ifc
 
 REPO = Path(__file__).resolve().parent.parent
-DOCS = ("README.md", "docs/ROS_INTERFACE.md", "docs/DEPLOYMENT.md")
+#: Every doc a reader gets (the topic pages too: text moved out of the README stays checked); the
+#: generated per-node reference under docs/reference/ is its generator's business.
+DOCS = ("README.md", "CHANGELOG.md",
+        *sorted(p.relative_to(REPO).as_posix() for p in (REPO / "docs").glob("*.md")))
 
 #: Names the docs rightly use that are no topic, service or node of ours (prefix match at a '/').
 ALLOWED = {
@@ -114,6 +118,10 @@ class Doc:
 
 def read_docs() -> list[Doc]:
     return [Doc(p, (REPO / p).read_text()) for p in DOCS]
+
+
+def read_doc(path: str) -> Doc:
+    return next(d for d in read_docs() if d.path == path)
 
 
 def expand(name: str) -> list[str]:
@@ -414,14 +422,15 @@ def _topics(cell: str) -> set[str]:
 
 
 @pytest.mark.ros
-def test_readme_node_table_lists_each_nodes_topics(real):
-    """Row by row, both ways: what a node subscribes and publishes, no more, no less; a row for every node
-    (foxglove_node's Foxglove channels are not ROS topics)."""
+def test_node_table_lists_each_nodes_topics(real):
+    """ROS_INTERFACE.md's node table (moved there from the README), row by row, both ways: what a node
+    subscribes and publishes, no more, no less; a row for every node (foxglove_node's Foxglove channels are
+    not ROS topics)."""
     from cpg_walker.nodes.interface import NODE_NAMES
 
-    doc = read_docs()[0]
+    doc = read_doc("docs/ROS_INTERFACE.md")
     table = re.search(r"^\| node \| subscribes \| publishes \|\n\|[-|]+\|\n((?:\|.*\n)+)", doc.prose, re.M)
-    assert table, "README.md: the node table (| node | subscribes | publishes |) is gone"
+    assert table, f"{doc.path}: the node table (| node | subscribes | publishes |) is gone"
     problems, rows = [], set()
     for row in re.finditer(r"^\| `(\w+)` \|([^|]*)\|(.*)\|$", table.group(1), re.M):
         node, where = NODE_NAMES[row.group(1)], doc.where(table.start(1) + row.start())
@@ -434,7 +443,7 @@ def test_readme_node_table_lists_each_nodes_topics(real):
             if have - said - INFRA:
                 problems.append(f"{where}: {row.group(1)} also {what} {sorted(have - said - INFRA)}")
     missing = set(NODE_NAMES.values()) - rows
-    problems += [f"README.md: no row for {sorted(missing)}"] if missing else []
+    problems += [f"{doc.path}: no row for {sorted(missing)}"] if missing else []
     assert not problems, "\n".join(problems)
 
 
@@ -443,7 +452,7 @@ def test_node_sections_topic_tables_match_the_node(real):
     """docs/ROS_INTERFACE.md's `| topic | type | ...` table of a node's section: a row marked '(sub)' is one
     of its subscriptions, every other row one of its publishers; every publisher has a row, and every
     subscription too where the table has '(sub)' rows."""
-    doc = read_docs()[1]
+    doc = read_doc("docs/ROS_INTERFACE.md")
     problems, nodes = [], set()
     for m in re.finditer(r"^\| topic \|.*\n\|[-|]+\|\n((?:\|.*\n)+)", doc.prose, re.M):
         node = doc.section_node(m.start())
@@ -463,6 +472,19 @@ def test_node_sections_topic_tables_match_the_node(real):
                                 f"{'subscription' if sub else 'publisher'} {t}")
     assert nodes >= {"sim", "cpg"}
     assert not problems, "\n".join(problems)
+
+
+@pytest.mark.ros
+def test_readme_graph_names_every_topic_of_the_nodes(real):
+    """The README's Mermaid node graph names every topic the built nodes publish or subscribe (their real
+    endpoints, relay_node's /net/... included; /rosout is rcl's), and nothing that is not one of ours."""
+    from test_readme import graph_topics
+
+    said = graph_topics((REPO / "README.md").read_text(encoding="utf-8"))
+    have = set().union(*real.pubs.values(), *real.subs.values()) - {"/rosout"}
+    assert not have - said, f"README.md's graph lacks {sorted(have - said)}"
+    names = real.names()
+    assert not {t for t in said if not allowed(t) and t not in names}, sorted(said - names)
 
 
 def test_the_allow_list_is_used():

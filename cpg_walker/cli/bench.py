@@ -1,13 +1,16 @@
 """`cpg-walker bench --out DIR`: run the benchmarks; write DIR/bench.json, bench.md, bench_table.md and the
-scaling plots (and, with --readme, the summary tables into the README)."""
+scaling plots (and, with --doc, the summary tables into their generated block: docs/benchmarks.md, where
+readme_blocks.BLOCKS puts it, or the FILE given)."""
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from cpg_walker.cli.checks import in_text_file, out_dir
 from cpg_walker.errors import InputError
 from cpg_walker.experiments.bench_sections import SECTIONS
+from cpg_walker.experiments.readme_blocks import BLOCKS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,10 +21,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="run only this section (repeatable); default: all",
     )
     p.add_argument("--quick", action="store_true", help="fewer repetitions (for smoke tests)")
-    p.add_argument("--readme", default=None, type=in_text_file, metavar="FILE",
-                   help="also write the summary tables into FILE's generated benchmark block (README.md)")
+    p.add_argument("--doc", "--readme", dest="doc", nargs="?", const=BLOCKS["bench-table"], default=None,
+                   type=in_text_file, metavar="FILE",
+                   help="also write the summary tables into FILE's generated benchmark block (without FILE: "
+                        f"{BLOCKS['bench-table']}; --readme is the former name)")
     p.add_argument("--from-json", default=None, type=in_text_file, metavar="BENCH_JSON",
-                   help="run nothing: regenerate the tables and plots (and --readme) from this bench.json")
+                   help="run nothing: regenerate the tables and plots (and --doc) from this bench.json")
     p.set_defaults(func=_run)
 
 
@@ -47,22 +52,27 @@ def read_results(path: str) -> dict:
     return results
 
 
-def _check_readme(path: str) -> None:
-    """--readme must hold the generated block's markers (it is replaced at the end of the run)."""
-    from pathlib import Path
+def _check_doc(path: str) -> None:
+    """--doc must be a text file holding the generated block's markers (replaced at the end of the run)."""
+    import argparse
 
-    from cpg_walker.experiments.bench_report import BEGIN, END
+    from cpg_walker.cli.checks import in_text_file
+    from cpg_walker.experiments.readme_blocks import read_block
 
-    text = Path(path).read_text(encoding="utf-8")
-    if BEGIN not in text or END not in text[text.find(BEGIN):]:
-        raise InputError(f"--readme {path}: no '{BEGIN}' ... '{END}' block to replace")
+    try:
+        in_text_file(path)  # argparse does not check --doc's default FILE (nargs='?')
+    except argparse.ArgumentTypeError as exc:
+        raise InputError(f"--doc {exc}") from None
+    if read_block(Path(path).read_text(encoding="utf-8"), "bench-table") is None:
+        raise InputError(f"--doc {path}: no '<!-- bench-table:begin -->' ... '<!-- bench-table:end -->' "
+                         "block to replace")
 
 
 def _run(args: argparse.Namespace) -> int:
     from cpg_walker.experiments.bench import headline_status
 
-    if args.readme is not None:
-        _check_readme(args.readme)
+    if args.doc is not None:
+        _check_doc(args.doc)
     if args.from_json:  # exit 1 if a headline run in it is invalid (the tables written first)
         from pathlib import Path
 
@@ -71,8 +81,8 @@ def _run(args: argparse.Namespace) -> int:
         results = read_results(args.from_json)  # write() checks the shape again (ValueError): a bug then
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
-        write(results, out, args.readme)
+        write(results, out, args.doc)
         return headline_status(results)
     from cpg_walker.experiments.bench import run_benchmarks
 
-    return headline_status(run_benchmarks(args.out, only=args.only, quick=args.quick, readme=args.readme))
+    return headline_status(run_benchmarks(args.out, only=args.only, quick=args.quick, readme=args.doc))

@@ -1,17 +1,19 @@
-"""`cpg-walker results [--out docs/results] [--only NAME ...] [--readme README.md]`: regenerate every result
-the docs quote (experiments/artifacts.py), each into DIR/<name>/ (the benchmarks into docs/bench), with
+"""`cpg-walker results [--out docs/results] [--only NAME ...] [--docs [ROOT]]`: regenerate every result the
+docs quote (experiments/artifacts.py), each into DIR/<name>/ (the benchmarks into docs/bench), with
 progress. ``headline`` - every headline walk of the README (experiments/headline.py, in-process) - runs
-here: headline.json and headline.md with the command, commit, date and load, and with --readme the
-README's generated results table; the others run their own `cpg-walker` command. Exit status: the worst
-of them (1: a walk fell, cli/outcome.py)."""
+here: headline.json and headline.md with the command, commit, date and load; the others run their own
+`cpg-walker` command. With --docs the generated tables are rewritten too, each in the doc under ROOT (the
+checkout, default .) that readme_blocks.BLOCKS names: the results table in README.md, the benchmark's in
+docs/benchmarks.md. Exit status: the worst of them (1: a walk fell, cli/outcome.py)."""
 
 from __future__ import annotations
 
 import argparse
 
-from cpg_walker.cli.checks import at_least, in_text_file, out_dir
+from cpg_walker.cli.checks import at_least, out_dir
 from cpg_walker.cli.outcome import OK, fall_line, report_fall
 from cpg_walker.experiments.artifacts import ARTIFACTS
+from cpg_walker.experiments.readme_blocks import BLOCKS, block_file
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -25,8 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         + f"{sum(a.wall_min for a in ARTIFACTS):.0f} min on 2 cores)")
     p.add_argument("--jobs", type=at_least(1, int), default=None, metavar="N",
                    help="parallel walks of the headline walks (default: every core)")
-    p.add_argument("--readme", default=None, type=in_text_file, metavar="FILE",
-                   help="also write the generated tables into FILE's blocks (README.md)")
+    p.add_argument("--docs", nargs="?", const=".", default=None, metavar="ROOT",
+                   help="also rewrite the generated tables, each in its doc under ROOT (default: the current "
+                        "directory, a checkout): " + ", ".join(f"{k} in {v}" for k, v in BLOCKS.items()))
     p.set_defaults(func=_run)
 
 
@@ -38,9 +41,9 @@ def _run(args: argparse.Namespace) -> int:
 
     from cpg_walker.experiments.artifacts import PLACES
 
-    if args.readme is not None:
-        _check_readme(args.readme)
     chosen = [a for a in ARTIFACTS if args.only is None or a.name in args.only]
+    if args.docs is not None:
+        _check_docs(args.docs, chosen)
     root, statuses = Path(args.out), []
     for k, art in enumerate(chosen):
         dest = root / PLACES.get(art.name, art.name)
@@ -50,7 +53,8 @@ def _run(args: argparse.Namespace) -> int:
         if not art.argv:
             status = _headline(dest, args)
         else:
-            extra = ["--readme", args.readme] if args.readme and art.name == "bench" else []
+            extra = ["--doc", str(block_file(_BLOCK_OF[art.name], args.docs))] \
+                if args.docs is not None and art.name in _BLOCK_OF else []
             argv = [*art.argv, "--out", str(dest), *extra]
             status = subprocess.run([sys.executable, "-m", "cpg_walker.cli.main", *argv]).returncode
         print(f"[{k + 1}/{len(chosen)}] {art.name}: exit status {status} after {time.monotonic() - t0:.0f} s",
@@ -59,16 +63,31 @@ def _run(args: argparse.Namespace) -> int:
     return max(statuses, default=OK)
 
 
-def _check_readme(path: str) -> None:
+#: The generated block each artifact writes with --docs (where it lives: readme_blocks.BLOCKS).
+_BLOCK_OF = {"headline": "results-table", "bench": "bench-table"}
+
+
+def _check_docs(root: str, chosen) -> None:
+    """Before any run: every block the chosen artifacts will write is in its file under ``root``."""
     from cpg_walker.errors import InputError
     from cpg_walker.experiments.readme_blocks import read_block
 
-    if read_block(open(path, encoding="utf-8").read(), "results-table") is None:
-        raise InputError(f"--readme {path}: no '<!-- results-table:begin -->' block to replace")
+    for art in chosen:
+        if art.name not in _BLOCK_OF:
+            continue
+        name = _BLOCK_OF[art.name]
+        path = block_file(name, root)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"--docs {root}: cannot read {path} ({exc.__class__.__name__}), which holds the "
+                             f"'{name}' block") from None
+        if read_block(text, name) is None:
+            raise InputError(f"--docs {root}: {path} has no '<!-- {name}:begin -->' block to replace")
 
 
 def _headline(dest, args: argparse.Namespace) -> int:
-    """The headline walks into ``dest``; the README's results block from them with --readme."""
+    """The headline walks into ``dest``; the README's results block from them with --docs."""
     import shlex
     import sys
     import time
@@ -86,10 +105,10 @@ def _headline(dest, args: argparse.Namespace) -> int:
     prog.close()
     doc["wall_s"] = round(time.monotonic() - t0, 1)
     js, md = write(dest, doc)
-    if args.readme:
+    if args.docs is not None:
         from cpg_walker.experiments.readme_blocks import replace_block
 
-        replace_block(args.readme, "results-table", markdown(doc))
+        replace_block(block_file(_BLOCK_OF["headline"], args.docs), _BLOCK_OF["headline"], markdown(doc))
     print(md.read_text(), end="")
     print(f"wrote {js} and {md}")
     return report_fall("results", [fall_line("results", r["fall_time_s"], what=r["title"])

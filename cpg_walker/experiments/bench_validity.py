@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-#: The commanded gait (ζ = α = 1) walks ≈ 0.08 m/s (README: 0.083 m/s over 60 s through the graph, the
+#: The commanded gait (ζ = α = 1) walks ≈ 0.08 m/s (results.md: 0.083 m/s over 60 s through the graph, the
 #: in-process loop 1.58 m in 20 s). A walk must cover at least 0.05 m, ≈ 0.6 s of that gait: the
 #: benchmark walks that are checked for movement last 3 s or more and cover ≥ 0.17 m even from standing
 #: (run_walk: 0.005 m in 1 s, 0.17 m in 3 s, 0.24 m in 4 s), while a robot that only stood (no targets, no
@@ -18,7 +18,7 @@ from collections.abc import Mapping
 #: section's 1 s graph runs move only millimetres by design: fall and ticks are checked there, not distance.
 MIN_WALK_DISTANCE_M = 0.05
 
-#: The runs behind the figures the README quotes (dotted paths into bench.json; a list is checked run by
+#: The runs behind the figures benchmarks.md quotes (dotted paths into bench.json; a list is checked run by
 #: run): an invalid one among them makes `cpg-walker bench` (and --from-json) exit 1.
 HEADLINE: tuple[str, ...] = (
     "robot.replay_runs",  # "the in-process replay 19× real time"

@@ -339,7 +339,7 @@ def run_faults(out_dir: str | Path, zeta: float = 1.0, warm_s: float = 14.0, awa
 
 
 def markdown_table(report: dict) -> str:
-    """The per-fault table (README / ROS_INTERFACE "Faults")."""
+    """The per-fault table (docs/faults.md)."""
     def f(v, fmt="{:.2f}"):
         return "-" if v is None else fmt.format(v)
 

@@ -1,10 +1,24 @@
 """Generated blocks in the docs: the text between ``<!-- NAME:begin ... -->`` and ``<!-- NAME:end -->`` is
-written by a command from a committed artifact (results tables), and a test checks it still is."""
+written by a command from a committed artifact (results tables), and a test checks it still is.
+
+Which file holds which block is data (``BLOCKS``), not code: a block moves with its topic's page, and the
+commands (`cpg-walker results --docs`, `cpg-walker bench --doc`) and the tests look it up here."""
 
 from __future__ import annotations
 
 import re
 from pathlib import Path
+
+#: Each generated block and the doc that holds it (a path from the repository root).
+BLOCKS = {
+    "results-table": "README.md",  # the headline walks (experiments/headline.py), the README's Results
+    "bench-table": "docs/benchmarks.md",  # the benchmark's summary tables (experiments/bench_report.py)
+}
+
+
+def block_file(name: str, root: str | Path = ".") -> Path:
+    """The doc holding block ``name`` under the checkout ``root`` (KeyError: no such block)."""
+    return Path(root) / BLOCKS[name]
 
 
 def _pattern(name: str) -> re.Pattern:

@@ -161,7 +161,7 @@ def run_soak(out_dir: str | Path, minutes: float = 10.0, period: float = 20.0, p
 
 
 def markdown(report: dict) -> str:
-    """The soak's summary table (README)."""
+    """The soak's summary table (docs/soak.md)."""
     rows = ["| node | RSS first window (MiB) | RSS last window (MiB) | max |", "|---|---|---|---|"]
     for n, r in report["rss_mib"].items():
         rows.append(f"| {n} | {r['first_window']} | {r['last_window']} | {r['max']} |")

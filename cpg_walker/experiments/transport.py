@@ -179,7 +179,7 @@ def _fall(run: dict) -> str:
 
 
 def markdown_table(report: dict) -> str:
-    """The results as a markdown table (README's "Degraded transport")."""
+    """The results as a markdown table (docs/transport.md)."""
     lines = [f"| zeta | feedback | perfect link | largest loss walked {report['duration_s']:g} s "
              "(first fall) | largest delay walked (first fall) |", "|---|---|---|---|---|"]
     for c in report["conditions"]:

@@ -6,7 +6,7 @@ the heading pathway's turn rate, a command timeout, and direction changes.
   speed of ζ = ±1 (α = 1) -> ζ by monotone interpolation of the measured speeds at α = 1 (up to the
   fastest walkable ζ); below it -> α by interpolation of the measured speeds at ζ = ±1 (shorter steps at
   the learned rhythm; speed ≈ linear in α). Slower ζ than 1 are measured and recorded but not used:
-  ζ 0.7 walks but 0.6 falls, and reversing into ζ −0.6 … −0.8 falls (README, "Our pathways"), while
+  ζ 0.7 walks but 0.6 falls, and reversing into ζ −0.6 … −0.8 falls (docs/feedback.md, "Our pathways"), while
   α 0.2 … 1 at ζ ±1 walks. Continuous in v (the branches meet at ζ = ±1, α = 1).
 * ``CmdVelFollower`` — a small state machine on sim time: ``command(t, linear_x, angular_z)`` and
   ``update(t, applied_zeta, applied_alpha)`` -> ``CmdVelOutput`` (ζ, α, turn rate to command). States:
@@ -14,7 +14,7 @@ the heading pathway's turn rate, a command timeout, and direction changes.
   (|linear.x| below ``stand_below``: α -> 0, the robot stands), ``reversing`` (the sign of linear.x flipped
   while stepping: α -> 0 first, ζ swapped once the applied α is below REVERSE_ALPHA, α back once the
   applied ζ is within REVERSE_ZETA_TOLERANCE of the new one), ``ramping`` (after a reversal the α command
-  rises at most REVERSE_ALPHA_RATE per sim s: measured safer, README), ``timed_out`` (no command for
+  rises at most REVERSE_ALPHA_RATE per sim s: measured safer, docs/cmd_vel.md), ``timed_out`` (no command for
   ``timeout`` sim s: α -> 0, turn 0, like diff_drive_controller's cmd_vel_timeout; the next command
   resumes). α -> 0 is smooth: HumanoidCPG's cascaded ζ/α command filter (3 × 0.25 s lags).
 * Turning: angular.z (clamped to ±``max_angular_z``) is FeedbackController.set_turn_rate: the heading
@@ -198,7 +198,7 @@ class CmdVelLimits:
     ``timeout`` sim s, linear.x in [min_linear_x, max_linear_x] m/s, |angular.z| <= max_angular_z rad/s,
     |linear.x| < stand_below -> stand (α 0), the α command falls at most ``alpha_fall_rate`` per sim s
     (a stop — timeout, standing, reversal — takes 1 / alpha_fall_rate s: the robot decelerates over
-    strides instead of freezing mid-stride; measured, README "Driving with /cmd_vel")."""
+    strides instead of freezing mid-stride; measured, docs/cmd_vel.md)."""
 
     timeout: float
     max_linear_x: float
@@ -271,7 +271,7 @@ class CmdVelOutput:
 REVERSE_ALPHA = 0.05
 #: ... then the new ζ, α 0 until the applied ζ is this close (fraction of |new ζ|) to it, ...
 REVERSE_ZETA_TOLERANCE = 0.1
-#: ... then the α command rises at most this fast (per sim s; measured: README "Driving with /cmd_vel").
+#: ... then the α command rises at most this fast (per sim s; measured: docs/cmd_vel.md).
 REVERSE_ALPHA_RATE = 0.05
 
 
@@ -286,7 +286,7 @@ class CmdVelFollower:
         self.last: tuple[float, float, float] | None = None  # (t, linear.x, angular.z) as received
         self.target: tuple[float, float, float] = (self.zeta, 0.0, 0.0)
         self._reversing = False  # direction swapped, waiting for the applied ζ
-        self.reverse_via_stop = True  # False: flip ζ at once (measured against; README)
+        self.reverse_via_stop = True  # False: flip ζ at once (measured against; docs/cmd_vel.md)
         self.alpha_rate: float | None = None  # limit on every rise of the α command (per sim s); None: none
         self.reverse_alpha_rate: float | None = REVERSE_ALPHA_RATE  # ... after a reversal
         self._ramp = False
