@@ -313,10 +313,10 @@ def test_a_bad_ros_domain_id_is_one_line(capsys, place, monkeypatch, data, value
 
 
 @pytest.mark.parametrize("argv, needle", [
-    (["walk", "--out", "{out}", "--schedule", "5,3,1"], "zeta"),
+    (["walk", "--out", "{out}", "--schedule", "5,nan,1"], "zeta and alpha must be finite"),
     (["walk", "--out", "{out}", "--schedule", "x"], "--schedule"),
     (["walk", "--out", "{out}", "--cpg-file", "{tmp}/missing.yaml"], "argument --cpg-file"),
-    (["cpg-walk", "--out", "{out}", "--schedule", "1,0.5,9"], "argument --schedule"),
+    (["cpg-walk", "--out", "{out}", "--schedule", "1,0.5,inf"], "argument --schedule"),
     (["cpg-walk", "--out", "{out}", "--pathways", "lateral,wings"], "wings"),
     (["cpg-walk", "--out", "{out}", "--set", "gain_scale=-1"], "--set: gain_scale"),
     (["cpg-walk", "--out", "{out}", "--set", "no_such_field=1"], "no_such_field"),

@@ -1,16 +1,16 @@
 """The README stays a newcomer's guide: at most 250 lines, with a Mermaid ``flowchart`` of the node graph that
-names every topic the nodes publish or subscribe, read from the nodes' source (no ROS needed: the
-``create_publisher`` / ``create_subscription`` calls of cpg_walker/nodes/*_node.py, relay_node's topics from
-config/relay.yaml); and every relative link of the docs (README.md, CHANGELOG.md, docs/*.md) points at a
-file or directory that exists. test_docs_match_code.py checks the graph against the built nodes too."""
+names every topic the nodes publish or subscribe (nodes/interface.py's INTERFACES, which test_reference.py
+checks against the running nodes both ways; relay_node's topics from config/relay.yaml); and every relative
+link of the docs (README.md, CHANGELOG.md, docs/*.md) points at a file or directory that exists."""
 
 from __future__ import annotations
 
-import ast
 import re
 from pathlib import Path
 
 import yaml
+
+from cpg_walker.nodes.interface import INTERFACES
 
 REPO = Path(__file__).resolve().parent.parent
 README = REPO / "README.md"
@@ -20,13 +20,8 @@ MAX_LINES = 250
 TOPIC = re.compile(r"(?<![\w./~:$)\-])/[A-Za-z_]\w*(?:/\w+)*")
 MERMAID = re.compile(r"^```mermaid\n(.*?)^```", re.S | re.M)
 
-#: Nodes whose topics are not literals in their source: the recorder subscribes to whatever it finds, the
-#: relay's are data (config/relay.yaml, read below). A dynamic topic in any other node fails the scan.
-DYNAMIC = {"recorder_node.py", "relay_node.py"}
-
-#: Links to a page another piece of work is adding (checked as soon as it exists): the generated per-node
-#: parameter reference (docs/reference/<node>.md, issue 23).
-PENDING = {"docs/reference"}
+#: Links to a page that may not exist yet (checked as soon as it exists).
+PENDING: set[str] = set()
 
 
 def graph_topics(readme: str) -> set[str]:
@@ -37,59 +32,9 @@ def graph_topics(readme: str) -> set[str]:
     return set(TOPIC.findall(graphs[0]))
 
 
-def _sides() -> tuple[str, ...]:
-    """The sole-load topics' suffixes (robot/frames.py's FOOT_LOAD_FRAMES, read without importing MuJoCo)."""
-    tree = ast.parse((REPO / "cpg_walker/robot/frames.py").read_text())
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Assign) and any(getattr(t, "id", "") == "FOOT_LOAD_FRAMES"
-                                                 for t in node.targets):
-            return tuple(pair.elts[0].value for pair in node.value.elts)
-    raise AssertionError("robot/frames.py: FOOT_LOAD_FRAMES not found")
-
-
-def _topic_args(path: Path) -> tuple[set[str], list[str]]:
-    """(topics, unresolved) of the create_publisher / create_subscription calls in one node's source: a
-    string literal; an f-string (only the sole loads use one: each placeholder is a FOOT_LOAD_FRAMES side);
-    a name bound by the enclosing comprehension over a literal tuple (foxglove_node's list)."""
-    tree = ast.parse(path.read_text())
-    parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
-    topics, unresolved = set(), []
-    for call in ast.walk(tree):
-        if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Attribute)
-                and call.func.attr in ("create_publisher", "create_subscription") and len(call.args) >= 2):
-            continue
-        arg = call.args[1]
-        if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
-            topics.add(arg.value)
-        elif isinstance(arg, ast.JoinedStr):
-            head = "".join(v.value for v in arg.values if isinstance(v, ast.Constant))
-            assert head == "/foot_load/" and len(arg.values) == 2, (path.name, ast.unparse(arg))
-            topics |= {head + side for side in _sides()}
-        elif isinstance(arg, ast.Name):
-            node, found = call, None
-            while node in parents and found is None:
-                node = parents[node]
-                if isinstance(node, (ast.ListComp, ast.GeneratorExp, ast.SetComp)):
-                    found = {c.value for g in node.generators for c in ast.walk(g.iter)
-                             if isinstance(c, ast.Constant) and isinstance(c.value, str)
-                             and c.value.startswith("/")}
-            if found:
-                topics |= found
-            else:
-                unresolved.append(ast.unparse(arg))
-        else:
-            unresolved.append(ast.unparse(arg))
-    return topics, unresolved
-
-
 def code_topics() -> set[str]:
-    """Every topic a node of the package publishes or subscribes, from the source."""
-    topics = set()
-    for path in sorted((REPO / "cpg_walker/nodes").glob("*_node.py")):
-        found, unresolved = _topic_args(path)
-        assert not unresolved or path.name in DYNAMIC, \
-            f"{path.name}: a topic not read from the source: {unresolved}"
-        topics |= found
+    """Every topic a node of the package publishes or subscribes: the interface, and the relay's (data)."""
+    topics = {t for i in INTERFACES.values() for t in (*i.subscribes, *i.publishes)}
     relay = yaml.safe_load((REPO / "config/relay.yaml").read_text())["relay"]["ros__parameters"]
     topics |= set(relay["topics"]) | {relay["prefix"] + t for t in relay["topics"]}
     return topics
@@ -101,7 +46,7 @@ def test_readme_is_short():
 
 
 def test_the_scan_finds_the_nodes_topics():
-    """The source scan still sees the graph (a refactor that hides the topics from it must fail here)."""
+    """The interface still names the graph's topics (a refactor that loses them must fail here)."""
     assert code_topics() >= {"/clock", "/joint_states", "/joint_torques", "/joint_targets",
                              "/joint_trajectory", "/imu", "/foot_load/left", "/foot_load/right",
                              "/odom/ground_truth", "/cmd_vel",

@@ -6,14 +6,15 @@ from __future__ import annotations
 
 import argparse
 
-from cpg_walker.cli.checks import config_or_file, count, non_negative, out_dir, positive, within
+from cpg_walker.cli.checks import config_or_file, count, non_negative, number, out_dir, positive, within
 from cpg_walker.cli.outcome import walk_status
 from cpg_walker.errors import InputError
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
 
 def _schedule(text: str) -> list[tuple[float, float, float]]:
-    """``--schedule``: "T,Z,A;..." with T >= 0 sim s and zeta, alpha in their ranges."""
+    """``--schedule``: "T,Z,A;..." with T >= 0 sim s and zeta, alpha finite (a value outside the ranges is
+    refused when its time comes, recorded in walk.json's ``refused``, and the walk goes on)."""
     out = []
     for item in text.split(";"):
         if not item.strip():
@@ -23,7 +24,7 @@ def _schedule(text: str) -> list[tuple[float, float, float]]:
             raise argparse.ArgumentTypeError(f"item {item!r}: expected 'time,zeta,alpha'")
         try:
             t, z, a = (check(x) for check, x in zip(
-                (non_negative, within(*ZETA_RANGE), within(*ALPHA_RANGE)), parts, strict=True))
+                (non_negative, number, number), parts, strict=True))
         except argparse.ArgumentTypeError as exc:
             raise argparse.ArgumentTypeError(f"item {item!r}: {exc}") from None
         out.append((t, z, a))

@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.errors import InputError
-from cpg_walker.walker.controller import HumanoidCPG
+from cpg_walker.walker.controller import HumanoidCPG, modulation_error
 from cpg_walker.walker.feedback import FeedbackController
 from cpg_walker.walker.gait_source import CPGGaitSource, FeedbackGaitSource
+from cpg_walker.walker.governor import GovernorConfig
 from cpg_walker.walker.learning import cpg_defaults, load_controller
 from cpg_walker.walker.loop import run_replay, summarize
 
@@ -26,11 +27,13 @@ from cpg_walker.walker.loop import run_replay, summarize
 def walk(ctrl: HumanoidCPG, duration: float, zeta: float | None = None, alpha: float | None = None,
          transition: str = "recording", blend_s: float = 1.0, handover_s: float | None = None,
          schedule: list[tuple[float, float, float]] | None = None, on_log=None, progress=None,
-         feedback: FeedbackController | None = None) -> dict:
+         feedback: FeedbackController | None = None, governed: bool = True) -> dict:
     """One walk from standing; returns the replay metrics plus the run's settings. With `feedback`
     (cpg/feedback.py) the source observes the IMU tilt and sole loads and closes the chosen pathways
     after the hand-over cross-fade (an empty pathway tuple only observes: calibration). ``zeta``/``alpha``
-    None: cpg_node's (config/cpg.yaml, ``cpg_defaults``)."""
+    None: cpg_node's (config/cpg.yaml, ``cpg_defaults``). ``governed``: the governor (walker/governor.py)
+    between the commands and the CPG, as in cpg_node. A scheduled value outside the ranges is refused
+    (``refused``: time, values, reason), as cpg_node refuses it, and the walk goes on."""
     from cpg_walker.robot.hoap2 import Hoap2Sim
     from cpg_walker.robot.pid import PidLaw
 
@@ -39,8 +42,16 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float | None = None, alpha: f
     defaults = cpg_defaults()
     zeta = float(defaults["zeta"]) if zeta is None else zeta
     alpha = float(defaults["alpha"]) if alpha is None else alpha
+    refused, kept = [], []
+    for t, z, a in schedule or []:
+        reason = modulation_error("zeta", z) or modulation_error("alpha", a)
+        if reason:
+            refused.append({"t_s": t, "zeta": z, "alpha": a, "reason": reason})
+        else:
+            kept.append((t, z, a))
+    schedule = kept
     kw = dict(transition=transition, handover_s=handover_s, blend_s=blend_s, schedule=schedule, zeta=zeta,
-              alpha=alpha)
+              alpha=alpha, governor=GovernorConfig.load() if governed else None)
     source = CPGGaitSource(ctrl, **kw) if feedback is None else FeedbackGaitSource(ctrl, feedback, **kw)
     sim = Hoap2Sim()
     sim.reset()
@@ -52,7 +63,7 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float | None = None, alpha: f
         "zeta": zeta, "alpha": alpha, "feedback": bool(feedback is not None and feedback.pathways),
         "n_oscillators": int(ctrl.net.N),
         "transition": transition, "handover_s": round(source.handover, 3), "blend_s": blend_s,
-        "schedule": [list(s) for s in (schedule or [])],
+        "schedule": [list(s) for s in (schedule or [])], "refused": refused, "governed": governed,
         "touchdowns_s": {k: [round(x, 3) for x in v] for k, v in result.touchdowns.items()},
     })
     if isinstance(source, FeedbackGaitSource):

@@ -70,8 +70,9 @@ def parse_schedule(text: str) -> list[tuple[float, float, float]]:
                 from None
         if not (t >= 0 and math.isfinite(t)):
             raise InputError(f"--schedule item {item!r}: the time must be >= 0 sim s")
-        check_modulation(z, a)
-        out.append((t, z, a))
+        if not (math.isfinite(z) and math.isfinite(a)):
+            raise InputError(f"--schedule item {item!r}: zeta and alpha must be finite numbers")
+        out.append((t, z, a))  # a value the node refuses is sent, refused and recorded: the walk goes on
     return sorted(out)
 
 
@@ -215,8 +216,7 @@ def run_graph_walk(
         overrides["feedback"] = bool(feedback)
     feedback = bool(defaults["feedback"]) if feedback is None else bool(feedback)
     schedule = sorted(schedule or [])
-    for t, z, a in schedule:
-        check_modulation(z, a)
+    for t, _, _ in schedule:
         if not 0 <= t < duration:
             raise InputError(f"schedule time {t:g} s is outside the walk (0 to {duration:g} sim s)")
     zeta, alpha = (float(defaults[name]) if value is None else value
@@ -277,6 +277,8 @@ def run_graph_walk(
     if schedule:
         report["schedule"] = landed(changes[0].sent, run.logs.get("cpg_node", ""))
         report["schedule_unsent"] = [list(x) for x in changes[0].todo]
+        report["refused"] = [{k: e[k] for k in ("t_s", "zeta", "alpha", "reason")}
+                             for e in changes[0].sent if not e["accepted"]]
         if changes[0].error:
             report["schedule_error"] = changes[0].error
     (out / "walk.json").write_text(json.dumps(report, indent=2) + "\n")

@@ -27,6 +27,7 @@ import numpy as np
 from cpg_walker.errors import InputError
 from cpg_walker.walker.feedback import PAPER_PATHWAYS, FeedbackConfig, FeedbackController, default_pathways
 from cpg_walker.walker.gait_source import CPGGaitSource, FeedbackGaitSource
+from cpg_walker.walker.governor import GovernorConfig
 from cpg_walker.walker.learning import cpg_defaults, load_controller
 from cpg_walker.walker.loop import heading_at
 
@@ -88,6 +89,7 @@ class WalkSpec:
     segments: tuple[tuple[float, float], ...] = ()  # extra (from, to) sim-s windows to measure
     record_targets: bool = False  # keep the CPG DOFs' targets (Fig. 8)
     label: str = ""
+    governed: bool = True  # the governor between the commands and the CPG (False: the raw controller)
 
     def feedback(self) -> tuple[tuple[str, ...] | None, dict]:
         paths, ov = variant(self.variant) if self.pathways is None else (tuple(self.pathways), {})
@@ -159,6 +161,7 @@ def run_walk(spec: WalkSpec) -> dict:
     else:
         sched.append((t_cmd, spec.zeta, spec.alpha))
     kw["schedule"] = sched
+    kw["governor"] = GovernorConfig.load() if spec.governed else None
     fb = None
     if paths is None:
         source = CPGGaitSource(ctrl, **kw)

@@ -49,6 +49,7 @@ from cpg_walker.walker.cmd_vel import LIMIT_KEYS, CmdVelLimits, check_twist
 from cpg_walker.walker.controller import modulation_error
 from cpg_walker.walker.cpg_driver import CPGDriver, FeedbackFade
 from cpg_walker.walker.feedback import FeedbackController
+from cpg_walker.walker.governor import GovernorConfig
 from cpg_walker.walker.learning import load_controller
 
 
@@ -104,7 +105,8 @@ class CPGNode(Node):
             lockstep=v["lockstep"], sensor_wait_s=v["sensor_wait"], lookahead=v["lookahead"],
             monitor_period_ns=round(v["monitor_period"] * 1e9), horizon_s=v["horizon"],
             horizon_step_ns=round(v["horizon_step"] * 1e9), horizon_stop_s=v["horizon_stop"],
-            rejoin_settle_ns=round(v["rejoin_settle"] * 1e9))
+            rejoin_settle_ns=round(v["rejoin_settle"] * 1e9),
+            governor=GovernorConfig.load() if v["governor"] else None)
         self.get_logger().info(f"CPG warmed up in {self.driver.warm_up():.3f} s")
         self.add_on_set_parameters_callback(self._on_set)
         self.builder = JointStateBuilder(self.driver.source.names, fields=("position", "velocity"))

@@ -154,6 +154,8 @@ CPG = (
     boolean("lockstep", "wait for the sensor samples stamped like each /clock tick (deterministic; with the "
             "sim's lockstep pacing)", read_only=True),
     boolean("feedback", "close the sensory feedback pathways (false: the open-loop CPG)"),
+    boolean("governor", "reach every zeta/alpha along a path that walks (walker/governor.py, "
+            "config/governor.yaml); false: the raw controller", read_only=True),
     double("sensor_timeout", "sim s without a newer /imu or /foot_load sample before feedback fades out",
            1e-3, 10.0),
     double("feedback_fade", "sim s over which feedback fades out (stale sensors, switched off) or back in",

@@ -31,6 +31,7 @@ from cpg_walker.walker.cmd_vel import CmdVelFollower, CmdVelLimits, CmdVelOutput
 from cpg_walker.walker.controller import HumanoidCPG
 from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
 from cpg_walker.walker.gait_source import FeedbackGaitSource, smootherstep, stop_fade
+from cpg_walker.walker.governor import GovernorConfig
 
 #: Sensor samples kept per topic, by stamp (lockstep takes the one stamped like its tick).
 SENSOR_KEEP = 32
@@ -148,8 +149,9 @@ class CPGDriver:
                  cmd_vel_limits: CmdVelLimits, follow_cmd_vel: bool = True, lookahead: bool = True,
                  monitor_period_ns: int = 100_000_000, horizon_s: float = 0.0, horizon_stop_s: float = 0.0,
                  horizon_step_ns: int = 40_000_000, rejoin_settle_ns: int = 0, lockstep: bool = False,
-                 sensor_wait_s: float = 0.4, wall: Callable[[], float] = time.monotonic) -> None:
-        self.out, self.wall = out, wall
+                 sensor_wait_s: float = 0.4, governor: GovernorConfig | None = None,
+                 wall: Callable[[], float] = time.monotonic) -> None:
+        self.out, self.wall, self.governor_config = out, wall, governor
         self.ctrl = ctrl
         self.learned_network = storage.to_dict(ctrl)  # the loaded network, to start over from (a sim reset)
         self.zeta, self.alpha = float(zeta), float(alpha)  # the commanded values (the parameters')
@@ -189,7 +191,8 @@ class CPGDriver:
     def _start(self, fb: FeedbackController) -> None:
         """The state of a fresh run: the source from t = 0, no tick yet, empty buffers."""
         fb.weight = self.fade.weight
-        self.source = FeedbackGaitSource(self.ctrl, fb, zeta=self.zeta, alpha=self.alpha)
+        self.source = FeedbackGaitSource(self.ctrl, fb, zeta=self.zeta, alpha=self.alpha,
+                                         governor=self.governor_config)
         self.source.keep_traces = False  # plots' traces: a node's memory stays flat
         self.rejoined_at_s: float | None = None
         self.join_seen_ns: int | None = None  # the first tick of a running sim, while standing by
@@ -571,8 +574,12 @@ class CPGDriver:
     def status(self, t_ns: int) -> dict[str, str]:
         """The status values of /diagnostics as of now: modulation, feedback, /cmd_vel."""
         ctrl, fb, c = self.ctrl, self.source.fb, self.counters
-        v = {"zeta_command": f"{ctrl.zeta_command:g}", "zeta": f"{ctrl.zeta:.6g}",
+        gov = self.source.governor
+        v = {"zeta_requested": f"{self.zeta:g}", "alpha_requested": f"{self.alpha:g}",
+             "zeta_command": f"{ctrl.zeta_command:g}", "zeta": f"{ctrl.zeta:.6g}",
              "alpha_command": f"{ctrl.alpha_command:g}", "alpha": f"{ctrl.alpha:.6g}",
+             "governor": "off" if self.governor_config is None else gov.state if gov else "waiting",
+             "governor_reason": gov.reason if gov else "",
              "feedback": self.feedback_state, "feedback_enabled": str(self.feedback_on).lower(),
              "feedback_weight": f"{self.fade.weight:.6g}",
              "sensor_age_s": "none" if self.sensor_age_s is None else f"{self.sensor_age_s:.3f}",

@@ -26,6 +26,7 @@ from cpg_walker.walker.feedback import (
     phase_reset,
     touchdown_phase,
 )
+from cpg_walker.walker.governor import Governor, GovernorConfig
 
 
 class CPGGaitSource:
@@ -44,11 +45,13 @@ class CPGGaitSource:
     cycle's mean (hip yaw ≈ 0, arms at their mean, body, and head/hands at 0 as in the replay).
     ``schedule``: list of (time_s, zeta, alpha) commands applied when t reaches time_s. With the
     "recording" transition, `zeta`/`alpha` other than 1 are commanded when the cross-fade ends (the CPG
-    takes over the recording at the recording's pace first)."""
+    takes over the recording at the recording's pace first). ``governor``: the config of a Governor
+    (walker/governor.py) between the commands and the CPG once it has taken over; None: the commands go to
+    the CPG as they are (the raw controller, for measuring its envelope)."""
 
     def __init__(self, ctrl: HumanoidCPG, transition: str = "recording", handover_s: float | None = None,
                  blend_s: float = 1.0, schedule: list[tuple[float, float, float]] | None = None,
-                 zeta: float = 1.0, alpha: float = 1.0):
+                 zeta: float = 1.0, alpha: float = 1.0, governor: GovernorConfig | None = None):
         if transition not in ("recording", "standing"):
             raise ValueError(f"unknown transition {transition!r}; use 'recording' or 'standing'")
         if not (blend_s >= 0 and math.isfinite(blend_s)):
@@ -88,6 +91,8 @@ class CPGGaitSource:
             if (zeta, alpha) != (1.0, 1.0):
                 self.schedule = sorted([*self.schedule, (self.handover + self.blend, zeta, alpha)])
         self._t_net = self.handover  # sim time the network state corresponds to
+        self.governor_config = governor
+        self.governor: Governor | None = None  # made at the takeover, from the commands then
         self._cache = None
         self.feedback_g: np.ndarray | None = None  # eqs 16–17 g_k applied while stepping (feedback.py)
 
@@ -107,6 +112,8 @@ class CPGGaitSource:
         self.ctrl.set_alpha(alpha)
         self._t_net = self.handover
         self.feedback_g = None
+        if self.governor is not None:
+            self.governor.reset(zeta, alpha)
 
     @property
     def t_net(self) -> float:
@@ -125,17 +132,37 @@ class CPGGaitSource:
         if self._t_net < self.takeover_s:
             self.schedule = [(self.takeover_s, zeta, alpha)]
             return True
-        self.ctrl.set_zeta(zeta)
-        self.ctrl.set_alpha(alpha)
+        self._request(zeta, alpha)
         return False
+
+    def _request(self, zeta: float, alpha: float) -> None:
+        gov = self._governor()
+        if gov is not None:
+            gov.request(zeta, alpha)
+        else:
+            self.ctrl.set_zeta(zeta)
+            self.ctrl.set_alpha(alpha)
+
+    def _governor(self) -> Governor | None:
+        """The governor once the CPG has taken over (made then, from the commands as they stand)."""
+        if self.governor is None and self.governor_config is not None and self._t_net >= self.takeover_s:
+            self.governor = Governor(self.governor_config, self.ctrl.zeta_command, self.ctrl.alpha_command)
+        return self.governor
 
     def _advance(self, t: float) -> None:
         while self.schedule and self.schedule[0][0] <= t + 1e-12:
             _, z, a = self.schedule.pop(0)
-            self.ctrl.set_zeta(z)
-            self.ctrl.set_alpha(a)
+            self._request(z, a)
+        ctrl = self.ctrl
         while self._t_net + 0.5 * self.h <= t:
-            self.ctrl.step(self.h, self.feedback_g)
+            gov = self._governor()
+            if gov is not None:
+                z, a = gov.update(self.h, ctrl.zeta, ctrl.alpha)
+                if z != ctrl.zeta_command:
+                    ctrl.set_zeta(z)
+                if a != ctrl.alpha_command:
+                    ctrl.set_alpha(a)
+            ctrl.step(self.h, self.feedback_g)
             self._t_net += self.h
 
     def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:

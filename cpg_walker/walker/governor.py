@@ -1,0 +1,160 @@
+"""The governor: any requested (ζ, α) in the declared ranges, at any moment, reached along a path the robot
+walks (issue 24). Pure (no ROS); the gait source runs it once per control step after the CPG has taken
+over, between the requests (parameters, /cmd_vel, schedules: `CPGGaitSource.command`) and the CPG's own
+command filters (`HumanoidCPG.set_zeta` / ``set_alpha``, the cascaded C² lags).
+
+What it does, each rule from a measured fall (config/governor.yaml says which):
+
+* **Envelope**: α is at most ``Envelope.alpha_max(ζ)`` — the step length that walks at that frequency,
+  interpolated from a measured table, forward and backward apart (slow walking needs short steps; |ζ|
+  below the table's first point stands: α 0).
+* **Slowing down**: when the requested ζ allows less α than is applied, α comes down first (ζ held) and
+  ζ follows once the applied α fits the new ζ's envelope.
+* **Reversal through a stop**: a request of the other direction brings α to 0 (ζ held), flips ζ once the
+  applied α is below ``reverse_alpha``, waits until the applied ζ is within ``reverse_zeta_tolerance`` of
+  the new one, then raises α at ``ramp_rate`` per s.
+* **α falls** at most ``fall_rate`` per s (a stop within a stride fell at some phases); after a stop it
+  rises at most ``ramp_rate`` per s. Otherwise a request inside the envelope of the current direction is
+  passed through as it is (the CPG's filters alone smooth it).
+
+``state`` says what it is doing (following | limited | slowing | reversing | ramping | standing) and
+``reason`` why the commanded values differ from the requested ones ('' when they do not).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cpg_walker.errors import InputError
+from cpg_walker.paths import config_path
+
+#: A state's α may exceed the envelope by this much before ζ waits for it (filter residue).
+ALPHA_SLACK = 0.02
+
+
+@dataclass(frozen=True)
+class Envelope:
+    """α_max per |ζ|, forward and backward: ((|ζ|, α_max), ...) sorted by |ζ|, linear in between, held
+    past the last point; below the first point the robot stands (α 0)."""
+
+    forward: tuple[tuple[float, float], ...]
+    backward: tuple[tuple[float, float], ...]
+
+    def __post_init__(self) -> None:
+        for name, pts in (("forward", self.forward), ("backward", self.backward)):
+            z = [p[0] for p in pts]
+            if not pts or z != sorted(z) or len(set(z)) != len(z) or any(
+                    not (math.isfinite(a) and a >= 0 and zz > 0) for zz, a in pts):
+                raise InputError(f"governor envelope {name}: |zeta| points must be > 0, strictly increasing, "
+                                 f"with finite alpha_max >= 0; got {pts}")
+
+    def alpha_max(self, zeta: float) -> float:
+        pts = self.forward if zeta >= 0 else self.backward
+        z = abs(zeta)
+        if z < pts[0][0]:
+            return 0.0
+        xs, ys = zip(*pts, strict=True)
+        return float(np.interp(z, xs, ys))
+
+
+@dataclass(frozen=True)
+class GovernorConfig:
+    """The governor's envelope and rates (config/governor.yaml)."""
+
+    envelope: Envelope
+    fall_rate: float = 0.5
+    ramp_rate: float = 0.25
+    reverse_alpha: float = 0.05
+    reverse_zeta_tolerance: float = 0.1
+
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> GovernorConfig:
+        import yaml
+
+        p = Path(path) if path else config_path("governor.yaml")
+        try:
+            d = yaml.safe_load(p.read_text(encoding="utf-8"))
+        except (OSError, yaml.YAMLError) as exc:
+            raise InputError(f"{p}: {exc}") from None
+        if not isinstance(d, dict) or not isinstance(d.get("envelope"), dict):
+            raise InputError(f"{p}: expected a mapping with 'envelope: {{forward: ..., backward: ...}}'")
+        env = d.pop("envelope")
+
+        def table(key: str) -> tuple[tuple[float, float], ...]:
+            rows = env.get(key)
+            if not isinstance(rows, list) or not all(isinstance(r, list) and len(r) == 2 for r in rows):
+                raise InputError(f"{p}: envelope.{key} must be a list of [|zeta|, alpha_max] pairs")
+            return tuple((float(z), float(a)) for z, a in rows)
+
+        known = {"fall_rate", "ramp_rate", "reverse_alpha", "reverse_zeta_tolerance"}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise InputError(f"{p}: unknown key(s) {unknown}")
+        rates = {k: float(v) for k, v in d.items()}
+        if any(not (math.isfinite(v) and v > 0) for v in rates.values()):
+            raise InputError(f"{p}: rates and tolerances must be finite and > 0, got {rates}")
+        return cls(Envelope(table("forward"), table("backward")), **rates)
+
+
+class Governor:
+    """Requested (ζ, α) -> the (ζ, α) to command, one control step at a time (module docstring).
+    ``zeta``, ``alpha``: what is commanded (and requested) when it starts."""
+
+    def __init__(self, config: GovernorConfig, zeta: float, alpha: float) -> None:
+        self.cfg = config
+        self.requested = (float(zeta), float(alpha))
+        self.zeta, self.alpha = float(zeta), float(alpha)  # the commands given to the CPG
+        self.state, self.reason = "following", ""
+        self._ramping = False
+
+    def request(self, zeta: float, alpha: float) -> None:
+        self.requested = (float(zeta), float(alpha))
+
+    def reset(self, zeta: float, alpha: float) -> None:
+        """Commanded = requested = (ζ, α): a re-entry (the CPG restarted at these commands)."""
+        self.requested = self.zeta, self.alpha = float(zeta), float(alpha)
+        self.state, self.reason, self._ramping = "following", "", False
+
+    def update(self, dt: float, applied_zeta: float, applied_alpha: float) -> tuple[float, float]:
+        """The (ζ, α) to command for the next ``dt`` s, given the CPG's applied (filtered) ζ and α."""
+        cfg, env = self.cfg, self.cfg.envelope
+        zr, ar = self.requested
+        direction = 1.0 if self.zeta >= 0 else -1.0
+        wants_other_way = zr != 0.0 and (zr > 0) != (direction > 0)
+        if wants_other_way:
+            if applied_alpha > cfg.reverse_alpha or self.alpha > cfg.reverse_alpha:
+                return self._set("reversing", f"reversing to zeta {zr:g} through a stop", self.zeta, 0.0, dt)
+            self.zeta, self._ramping = zr, True  # stepping has stopped: the new direction
+        z_target = self.zeta if zr == 0.0 else zr  # ζ 0: stand, keeping the direction
+        if abs(applied_zeta - z_target) > cfg.reverse_zeta_tolerance * abs(z_target) and self._ramping \
+                and self.alpha <= cfg.reverse_alpha:
+            return self._set("reversing", f"reversing to zeta {zr:g}: the new zeta first", z_target, 0.0, dt)
+        a_max = env.alpha_max(z_target)
+        a_target = min(ar, a_max)
+        if applied_alpha > a_max + ALPHA_SLACK and abs(z_target) < abs(self.zeta):
+            why = f"alpha {applied_alpha:.2f} down to {a_max:g} before zeta {z_target:g}"
+            return self._set("slowing", why, self.zeta, a_target, dt)
+        self.zeta = z_target
+        if a_target < ar:
+            why = "stands" if a_max == 0.0 else f"alpha limited to {a_max:.3g}"
+            return self._set("standing" if a_max == 0.0 else "limited",
+                             f"zeta {z_target:g}: {why} (the measured envelope)", z_target, a_target, dt)
+        if self._ramping and self.alpha < a_target:
+            return self._set("ramping", f"alpha rising at {cfg.ramp_rate:g}/s after a stop", z_target,
+                             a_target, dt)
+        self._ramping = False
+        return self._set("standing" if a_target == 0.0 else "following", "", z_target, a_target, dt)
+
+    def _set(self, state: str, reason: str, zeta: float, alpha: float, dt: float) -> tuple[float, float]:
+        """Command (ζ, α): α falls at most fall_rate per s, and while ramping rises at most ramp_rate."""
+        if alpha < self.alpha:
+            alpha = max(alpha, self.alpha - self.cfg.fall_rate * dt)
+        elif alpha > self.alpha and self._ramping:
+            alpha = min(alpha, self.alpha + self.cfg.ramp_rate * dt)
+        self.zeta, self.alpha = zeta, alpha
+        self.state, self.reason = state, reason
+        return zeta, alpha
