@@ -159,7 +159,7 @@ OUT_COMMANDS = {
     "bench": [], "cmd-vel-map": [], "cpg-walk": [], "demo": [], "drive-check": [], "faults": [],
     "feedback-search": [], "fit": ["--csv", "{csv}"], "learn": [], "margins": [], "plot": ["{bag}"],
     "record": [], "replay": [], "section2": [], "soak": [], "sweep": [], "transport": [],
-    "results": [], "two-hosts": [], "walk": [],
+    "results": [], "two-hosts": [], "walk": [], "random-walks": [],
 }
 OUT_OPTIONS = [(cmd, "--out") for cmd in OUT_COMMANDS] + [("graph", "--log-dir"), ("graph", "--record")]
 
@@ -315,6 +315,8 @@ def test_a_bad_ros_domain_id_is_one_line(capsys, place, monkeypatch, data, value
 @pytest.mark.parametrize("argv, needle", [
     (["walk", "--out", "{out}", "--schedule", "5,nan,1"], "zeta and alpha must be finite"),
     (["walk", "--out", "{out}", "--schedule", "x"], "--schedule"),
+    (["random-walks", "--out", "{out}", "--seeds", "3-x"], "argument --seeds"),
+    (["random-walks", "--out", "{out}", "--seeds", "-1"], "argument --seeds"),
     (["walk", "--out", "{out}", "--cpg-file", "{tmp}/missing.yaml"], "argument --cpg-file"),
     (["cpg-walk", "--out", "{out}", "--schedule", "1,0.5,inf"], "argument --schedule"),
     (["cpg-walk", "--out", "{out}", "--pathways", "lateral,wings"], "wings"),

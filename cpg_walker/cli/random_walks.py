@@ -1,0 +1,55 @@
+"""`cpg-walker random-walks --seeds A-B --out DIR [--duration S] [--feedback ours|paper|off] [--jobs N]`:
+seeded random (ζ, α) command sequences inside the declared ranges, a new command every 8-16 sim s,
+walked in-process through the governor (experiments/random_commands.py); DIR/random_walks.json. Exits 1
+when a walk fell, with the seeds that fell on the last line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from cpg_walker.cli.checks import count, out_dir, positive
+
+
+def seed_range(text: str) -> list[int]:
+    """``A-B`` (inclusive) or ``A,B,C``: the seeds, each a non-negative integer."""
+    try:
+        if "-" in text:
+            a, b = (int(x) for x in text.split("-", 1))
+            seeds = list(range(a, b + 1))
+        else:
+            seeds = [int(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected A-B or A,B,C (integers), got {text!r}") from None
+    if not seeds or min(seeds) < 0:
+        raise argparse.ArgumentTypeError(f"expected at least one seed >= 0, got {text!r}")
+    return seeds
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("random-walks", help="seeded random zeta/alpha sequences walked in-process; exit 1 "
+                                            "on a fall")
+    p.add_argument("--seeds", type=seed_range, default=seed_range("0-9"), metavar="A-B",
+                   help="the sequences' seeds: A-B (inclusive) or A,B,C (default 0-9)")
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
+    p.add_argument("--duration", type=positive, default=120.0, metavar="S",
+                   help="sim s per walk (default 120)")
+    p.add_argument("--feedback", choices=("ours", "paper", "off"), default="ours",
+                   help="feedback variant (default ours: cpg_node's)")
+    p.add_argument("--jobs", type=count, default=None, metavar="N",
+                   help="parallel walks (default: every core)")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from cpg_walker.experiments.random_commands import run_random_walks
+
+    r = run_random_walks(args.seeds, args.out, args.duration, args.feedback, args.jobs,
+                         command=" ".join(["cpg-walker", *sys.argv[1:]]))
+    fell = [run for run in r["runs"] if run["fell"]]
+    print(f"{len(r['runs'])} random walks of {args.duration:g} s: {len(fell)} fell", file=sys.stderr)
+    if fell:
+        where = ", ".join(f"{run['label']} at {run['fall_time_s']} s" for run in fell)
+        print(f"cpg-walker random-walks: FELL: {where}", file=sys.stderr)
+        return 1
+    return 0
