@@ -133,20 +133,22 @@ class Governor:
         if abs(applied_zeta - z_target) > cfg.reverse_zeta_tolerance * abs(z_target) and self._ramping \
                 and self.alpha <= cfg.reverse_alpha:
             return self._set("reversing", f"reversing to zeta {zr:g}: the new zeta first", z_target, 0.0, dt)
-        a_max = env.alpha_max(z_target)
+        a_max = 0.0 if zr == 0.0 else env.alpha_max(z_target)  # ζ 0: stand
         a_target = min(ar, a_max)
         if applied_alpha > a_max + ALPHA_SLACK and abs(z_target) < abs(self.zeta):
             why = f"alpha {applied_alpha:.2f} down to {a_max:g} before zeta {z_target:g}"
             return self._set("slowing", why, self.zeta, a_target, dt)
         self.zeta = z_target
+        limit = ""
         if a_target < ar:
             why = "stands" if a_max == 0.0 else f"alpha limited to {a_max:.3g}"
-            return self._set("standing" if a_max == 0.0 else "limited",
-                             f"zeta {z_target:g}: {why} (the measured envelope)", z_target, a_target, dt)
+            limit = f"zeta {z_target:g}: {why} (the measured envelope)"
         if self._ramping and self.alpha < a_target:
-            return self._set("ramping", f"alpha rising at {cfg.ramp_rate:g}/s after a stop", z_target,
-                             a_target, dt)
+            why = f"alpha rising at {cfg.ramp_rate:g}/s after a stop" + (f"; {limit}" if limit else "")
+            return self._set("ramping", why, z_target, a_target, dt)
         self._ramping = False
+        if limit:
+            return self._set("standing" if a_max == 0.0 else "limited", limit, z_target, a_target, dt)
         return self._set("standing" if a_target == 0.0 else "following", "", z_target, a_target, dt)
 
     def _set(self, state: str, reason: str, zeta: float, alpha: float, dt: float) -> tuple[float, float]:

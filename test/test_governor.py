@@ -1,0 +1,103 @@
+"""The governor (walker/governor.py) alone: driven by a stand-in of the CPG's command filters (first-order
+lags), it passes a request inside the envelope through, caps α to the envelope, brings α down before ζ
+slows, reverses through a stop (α 0, then ζ, then α ramping), lets α fall at most fall_rate per s, stands
+below the envelope's slowest ζ; the packaged config loads and a broken one names the problem."""
+
+from __future__ import annotations
+
+import math
+from itertools import pairwise
+
+import pytest
+
+from cpg_walker.errors import InputError
+from cpg_walker.walker.governor import Envelope, Governor, GovernorConfig
+
+DT = 0.002
+ENV = Envelope(forward=((0.3, 0.5), (0.7, 1.0), (1.5, 1.2)), backward=((0.3, 0.5), (1.5, 1.0)))
+CFG = GovernorConfig(ENV, fall_rate=0.5, ramp_rate=0.25, reverse_alpha=0.05, reverse_zeta_tolerance=0.1)
+
+
+class Lagged:
+    """The CPG's applied ζ, α: first-order lags (0.25 s) of the commands."""
+
+    def __init__(self, zeta: float, alpha: float) -> None:
+        self.zeta, self.alpha = zeta, alpha
+
+    def step(self, zc: float, ac: float) -> None:
+        k = 1 - math.exp(-DT / 0.25)
+        self.zeta += k * (zc - self.zeta)
+        self.alpha += k * (ac - self.alpha)
+
+
+def _run(gov: Governor, cpg: Lagged, seconds: float) -> list[tuple[float, float, float, float, str]]:
+    """(ζ cmd, α cmd, applied ζ, applied α, state) per step."""
+    out = []
+    for _ in range(round(seconds / DT)):
+        z, a = gov.update(DT, cpg.zeta, cpg.alpha)
+        cpg.step(z, a)
+        out.append((z, a, cpg.zeta, cpg.alpha, gov.state))
+    return out
+
+
+def test_a_request_inside_the_envelope_passes_through():
+    gov, cpg = Governor(CFG, 1.0, 1.0), Lagged(1.0, 1.0)
+    gov.request(1.3, 1.1)
+    z, a, *_, state = _run(gov, cpg, 0.01)[0]
+    assert (z, a, state, gov.reason) == (1.3, 1.1, "following", "")
+
+
+def test_alpha_is_capped_to_the_envelope_with_the_reason():
+    gov, cpg = Governor(CFG, 1.0, 1.0), Lagged(1.0, 1.0)
+    gov.request(1.5, 2.0)
+    trace = _run(gov, cpg, 1.0)
+    assert trace[-1][1] == pytest.approx(1.2) and gov.state == "limited" and "1.2" in gov.reason
+
+
+def test_slowing_down_brings_alpha_down_before_zeta():
+    gov, cpg = Governor(CFG, 1.0, 1.0), Lagged(1.0, 1.0)
+    gov.request(0.3, 1.0)
+    trace = _run(gov, cpg, 4.0)
+    for z, _, _, applied_alpha, _ in trace:
+        if z == 0.3:  # zeta moves only once the applied alpha fits the slow envelope
+            assert applied_alpha <= 0.5 + 0.02 + 1e-9
+    assert trace[0][4] == "slowing" and trace[-1][0] == 0.3 and trace[-1][1] == pytest.approx(0.5)
+    alphas = [a for _, a, *_ in trace]
+    assert all(a0 - a1 <= 0.5 * DT + 1e-12 for a0, a1 in pairwise(alphas))  # fall rate
+
+
+def test_a_reversal_goes_through_a_stop_and_ramps_up():
+    gov, cpg = Governor(CFG, 1.0, 1.0), Lagged(1.0, 1.0)
+    gov.request(-1.0, 0.8)
+    trace = _run(gov, cpg, 12.0)
+    flip = next(i for i, (z, *_rest) in enumerate(trace) if z < 0)
+    assert trace[flip][3] <= 0.05 + 1e-9  # the applied alpha had stopped stepping when zeta flipped
+    assert all(s == "reversing" for *_, s in trace[:flip])
+    stepping = next(i for i, (_, a, *_rest) in enumerate(trace) if i > flip and a > 0)
+    assert abs(trace[stepping][2] + 1.0) <= 0.1  # alpha rises once the applied zeta is near the new one
+    assert trace[stepping][4] == "ramping"
+    ramp = [a for _, a, *_ in trace[stepping:]]
+    assert all(a1 - a0 <= 0.25 * DT + 1e-12 for a0, a1 in pairwise(ramp))
+    a_max = ENV.alpha_max(-1.0)  # 0.79: the backward envelope caps the requested 0.8
+    assert trace[-1][:2] == (-1.0, pytest.approx(a_max)) and gov.state == "limited"
+
+
+def test_below_the_slowest_zeta_it_stands_and_keeps_its_direction():
+    gov, cpg = Governor(CFG, -1.0, 1.0), Lagged(-1.0, 1.0)
+    gov.request(0.0, 1.0)
+    trace = _run(gov, cpg, 4.0)
+    assert trace[-1][1] == 0.0 and trace[-1][0] < 0 and gov.state == "standing"
+    gov.request(-0.1, 1.0)
+    assert _run(gov, cpg, 0.1)[-1][1] == 0.0
+
+
+def test_the_packaged_config_loads_and_a_broken_one_names_the_problem(tmp_path):
+    cfg = GovernorConfig.load()
+    assert cfg.envelope.alpha_max(1.0) > 0 and cfg.envelope.alpha_max(0.0) == 0.0
+    bad = tmp_path / "g.yaml"
+    bad.write_text("envelope: {forward: [[0.5, 1.0], [0.3, 0.5]], backward: [[0.3, 0.5]]}\n")
+    with pytest.raises(InputError, match="strictly increasing"):
+        GovernorConfig.load(bad)
+    bad.write_text("envelope: {forward: [[0.3, 0.5]], backward: [[0.3, 0.5]]}\nfall_rat: 1\n")
+    with pytest.raises(InputError, match="fall_rat"):
+        GovernorConfig.load(bad)
