@@ -50,19 +50,23 @@ def demo_segments(end_s: float) -> tuple[tuple[float, float, str], ...]:
 
 DEMO_S = 60.0  # the demo's default duration (cpg-walker demo, make demo)
 
+#: The walks as a user gets them: through the governor (cpg_node's default).
 SCENARIOS: tuple[Scenario, ...] = (
-    Scenario("zeta1_60s", "zeta 1, 60 s (the learned walk)", WalkSpec(1.0, 1.0, "standing", 60.0)),
-    Scenario("zeta1.5_from_standing", "zeta 1.5 from standing", WalkSpec(1.5, 1.0, "standing", 40.0)),
-    Scenario("zeta1.5_at_10s", "zeta 1 -> 1.5 at 10 s", WalkSpec(1.5, 1.0, "at_10s", 40.0)),
+    Scenario("zeta1_60s", "zeta 1, 60 s (the learned walk)",
+             WalkSpec(1.0, 1.0, "standing", 60.0, governed=True)),
+    Scenario("zeta1.5_from_standing", "zeta 1.5 from standing",
+             WalkSpec(1.5, 1.0, "standing", 40.0, governed=True)),
+    Scenario("zeta1.5_at_10s", "zeta 1 -> 1.5 at 10 s", WalkSpec(1.5, 1.0, "at_10s", 40.0, governed=True)),
     Scenario("zeta-1.2_from_standing", "zeta -1.2 (backwards) from standing",
-             WalkSpec(-1.2, 1.0, "standing", 40.0)),
-    Scenario("zeta-1.2_at_10s", "zeta 1 -> -1.2 at 10 s", WalkSpec(-1.2, 1.0, "at_10s", 40.0)),
-    Scenario("reversal_at_15s", "reversal zeta 1 -> -1 at 15 s", WalkSpec(-1.0, 1.0, "at_15s", 40.0)),
+             WalkSpec(-1.2, 1.0, "standing", 40.0, governed=True)),
+    Scenario("zeta-1.2_at_10s", "zeta 1 -> -1.2 at 10 s", WalkSpec(-1.2, 1.0, "at_10s", 40.0, governed=True)),
+    Scenario("reversal_at_15s", "reversal zeta 1 -> -1 at 15 s",
+             WalkSpec(-1.0, 1.0, "at_15s", 40.0, governed=True)),
     Scenario("alpha_0_then_1", "alpha 1 -> 0 at 10 s (stands), -> 1 at 25 s (walks again)",
-             WalkSpec(1.0, 0.0, "at_10s", 40.0, schedule=((25.0, 1.0, 1.0),)),
+             WalkSpec(1.0, 0.0, "at_10s", 40.0, schedule=((25.0, 1.0, 1.0),), governed=True),
              segments=((10.0, 25.0, "alpha 0"), (25.0, 50.0, "alpha 1 again"))),
     Scenario("demo_schedule", f"the demo's schedule, {DEMO_S:g} s",
-             WalkSpec(1.0, 1.0, "standing", DEMO_S,
+             WalkSpec(1.0, 1.0, "standing", DEMO_S, governed=True,
                       schedule=tuple((t, z, a) for t, z, a, _ in DEMO_SCHEDULE if t < DEMO_S)),
              segments=demo_segments(DEMO_S)),
 )

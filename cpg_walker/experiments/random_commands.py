@@ -35,7 +35,7 @@ def sequence(seed: int, duration_s: float = 120.0, min_gap_s: float = MIN_GAP_S,
 def spec(seed: int, duration_s: float = 120.0, feedback: str = "ours") -> WalkSpec:
     """The walk of one seed: from standing at ζ = α = 1, then the seed's sequence."""
     return WalkSpec(duration_after_s=duration_s, schedule=sequence(seed, duration_s), variant=feedback,
-                    label=f"seed {seed}")
+                    label=f"seed {seed}", governed=True)
 
 
 def _one(s: WalkSpec) -> dict:

@@ -89,7 +89,8 @@ class WalkSpec:
     segments: tuple[tuple[float, float], ...] = ()  # extra (from, to) sim-s windows to measure
     record_targets: bool = False  # keep the CPG DOFs' targets (Fig. 8)
     label: str = ""
-    governed: bool = True  # the governor between the commands and the CPG (False: the raw controller)
+    governed: bool = False  # the governor between the commands and the CPG, as in cpg_node (False: the raw
+    #                         controller, what the sweeps measure)
 
     def feedback(self) -> tuple[tuple[str, ...] | None, dict]:
         paths, ov = variant(self.variant) if self.pathways is None else (tuple(self.pathways), {})
