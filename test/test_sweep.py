@@ -31,6 +31,7 @@ alpha:
 push: {zeta: 1.0, at_s: 0.5, after_s: 0.5, duration_s: 0.1, directions: [1.0], variants: [ours],
        max_impulse_Ns: 4.0, iterations: 1}
 fig8: {zeta: 1.2, start: at_1s, after_s: 1.0, plot_from_s: 0.0, plot_periods: 1, variants: ['off', ours]}
+transitions: {states: [[1.0, 1.0], [-1.0, 1.0]], phases: 2, from_s: 0.5, to_s: 1.0, after_s: 0.5}
 paper:
   speed_points: [{zeta: 1.5, speed_mps: 0.12}]
   fall_threshold_without_feedback: 1.05
@@ -68,7 +69,11 @@ def test_sweep_writes_json_markdown_and_pngs(tmp_path):
     assert len(fig8[0]["targets"]["names"]) == 10 and len(fig8[0]["targets"]["rows"]) > 50
     md = (out / "sweep.md").read_text()
     assert "| +1.5 |" in md and "| -1 |" in md and "standing: off" in md and "at_1s: ours" in md
-    for png in ("speed_vs_zeta", "fall_map", "heading", "alpha", "fig8"):
+    tr = json.loads((out / "transitions.json").read_text())
+    assert len(tr["runs"]) == 2 * 2 and {(tuple(r["from"]), tuple(r["to"])) for r in tr["runs"]} == {
+        ((1.0, 1.0), (-1.0, 1.0)), ((-1.0, 1.0), (1.0, 1.0))}
+    assert len(tr["survived_fraction"]) == 2 and tr["survived_fraction"][0][0] is None
+    for png in ("speed_vs_zeta", "fall_map", "heading", "alpha", "fig8", "transitions"):
         assert (out / f"{png}.png").read_bytes()[:4] == b"\x89PNG"
 
 

@@ -71,6 +71,10 @@ def load_config(path: str | Path | None = None, quick: bool = False) -> dict:
     for key in ("duration_after_s",):
         if not (isinstance(cfg[key], (int, float)) and cfg[key] > 0):
             raise c.error((key,), f"must be a positive number, got {cfg[key]!r}")
+    t = cfg["transitions"]
+    if not (isinstance(t.get("phases"), int) and t["phases"] >= 1 and t.get("states")
+            and all(isinstance(s, list) and len(s) == 2 for s in t["states"])):
+        raise c.error(("transitions",), "states: a list of [zeta, alpha]; phases: an integer >= 1")
     p = cfg["push"]
     if not (p["max_impulse_Ns"] > 0 and p["iterations"] >= 1 and p["duration_s"] > 0):
         raise c.error(("push",), "max_impulse_Ns, duration_s must be > 0 and iterations >= 1")
@@ -181,6 +185,14 @@ def run_sweep(out_dir: str | Path, quick: bool = False, jobs: int | None = None,
                       str(plot_alpha(report, out / "alpha.png")),
                       str(plot_fig8(report, out / "fig8.png"))]
     (out / "sweep.md").write_text(markdown(report))
+    from cpg_walker.experiments.transitions import run_transitions
+
+    t = cfg["transitions"]
+    times = tuple(float(t[k]) for k in ("from_s", "to_s", "after_s"))
+    tr = run_transitions(out, tuple(tuple(float(x) for x in s) for s in t["states"]), int(t["phases"]), jobs,
+                         times)
+    report["transitions"] = {"falls": tr["falls"], "runs": len(tr["runs"])}
+    report["pngs"].append(str(out / "transitions.png"))
     return report
 
 
