@@ -68,6 +68,8 @@ class GovernorConfig:
     envelope: Envelope
     fall_rate: float = 0.5
     ramp_rate: float = 0.25
+    rise_rate: float = 0.25
+    zeta_rate: float = 0.25
     reverse_alpha: float = 0.05
     reverse_zeta_tolerance: float = 0.1
 
@@ -90,7 +92,7 @@ class GovernorConfig:
                 raise InputError(f"{p}: envelope.{key} must be a list of [|zeta|, alpha_max] pairs")
             return tuple((float(z), float(a)) for z, a in rows)
 
-        known = {"fall_rate", "ramp_rate", "reverse_alpha", "reverse_zeta_tolerance"}
+        known = {"fall_rate", "ramp_rate", "rise_rate", "zeta_rate", "reverse_alpha", "reverse_zeta_tolerance"}
         unknown = sorted(set(d) - known)
         if unknown:
             raise InputError(f"{p}: unknown key(s) {unknown}")
@@ -152,11 +154,16 @@ class Governor:
         return self._set("standing" if a_target == 0.0 else "following", "", z_target, a_target, dt)
 
     def _set(self, state: str, reason: str, zeta: float, alpha: float, dt: float) -> tuple[float, float]:
-        """Command (ζ, α): α falls at most fall_rate per s, and while ramping rises at most ramp_rate."""
+        """Command (ζ, α): α falls at most fall_rate per s and rises at most rise_rate (ramp_rate after a
+        stop); ζ moves at most zeta_rate per s within a direction (a reversal flips it at α 0)."""
+        cfg = self.cfg
         if alpha < self.alpha:
-            alpha = max(alpha, self.alpha - self.cfg.fall_rate * dt)
-        elif alpha > self.alpha and self._ramping:
-            alpha = min(alpha, self.alpha + self.cfg.ramp_rate * dt)
+            alpha = max(alpha, self.alpha - cfg.fall_rate * dt)
+        elif alpha > self.alpha:
+            alpha = min(alpha, self.alpha + (cfg.ramp_rate if self._ramping else cfg.rise_rate) * dt)
+        if zeta != self.zeta and (zeta > 0) == (self.zeta > 0):
+            step = cfg.zeta_rate * dt
+            zeta = min(max(zeta, self.zeta - step), self.zeta + step)
         self.zeta, self.alpha = zeta, alpha
         self.state, self.reason = state, reason
         return zeta, alpha
