@@ -22,7 +22,6 @@ executor ``spin_once`` versus the direct wait-set poll the nodes use).
 from __future__ import annotations
 
 import json
-import re
 import tempfile
 import time
 from pathlib import Path
@@ -31,11 +30,6 @@ import numpy as np
 
 from cpg_walker.nodes import interface as ifc
 from cpg_walker.nodes.interface import PACINGS
-
-
-def _node_stats(log: str) -> dict:
-    m = re.findall(r"stats (\{.*\})", log)
-    return json.loads(m[-1]) if m else {}
 
 
 def graph_run(pacing: str, duration: float, target: str | None = None, control_period: float | None = None,
@@ -52,7 +46,7 @@ def graph_run(pacing: str, duration: float, target: str | None = None, control_p
                     timeout=60 + 20 * duration, tag=tag)
     rec, s = run.record, run.record.stats
     cpu = {"sim_node": round(s["cpu_s"] / s["wall_s"], 3) if s["wall_s"] else None}
-    node_stats = {name: _node_stats(log) for name, log in run.logs.items() if name != "sim_node"}
+    node_stats = {name: stats for name, stats in run.stats.items() if name != "sim_node"}
     for name, stats in node_stats.items():
         cpu[name] = stats.get("cpu_fraction")
     out = {

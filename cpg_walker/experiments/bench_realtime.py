@@ -27,7 +27,7 @@ import threading
 import time
 from pathlib import Path
 
-from cpg_walker.experiments.bench_graph import _node_stats, check_graph_run, checked
+from cpg_walker.experiments.bench_graph import check_graph_run, checked
 from cpg_walker.nodes import interface as ifc
 
 #: (name, attached subscribers, CPU-bound process) of the full run; ``--quick`` runs QUICK_SCENARIOS.
@@ -117,8 +117,8 @@ def scenario_run(subscribers: int, cpu_load: bool, duration: float, work: Path, 
         sampling.set()
         sampler.join()
     rec, s = run.record, run.record.stats
-    cpg = _node_stats(run.logs["cpg_node"])
-    pid = _node_stats(run.logs["pid_node"])
+    cpg = run.stats.get("cpg_node", {})
+    pid = run.stats.get("pid_node", {})
     periods = max(1, int(s["periods"]))
     tick = cpg.get("tick", {})
     received = {}

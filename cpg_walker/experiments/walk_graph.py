@@ -266,12 +266,11 @@ def run_graph_walk(
         "n_oscillators": int(ctrl.net.N) if ctrl is not None else None,
         "cpg_file": cpg_file or "learned at start-up",
     }
-    cpg_stats = re.findall(r"stats (\{.*\})", run.logs.get("cpg_node", ""))
+    cpg_stats = run.stats.get("cpg_node")
     if cpg_stats:
-        report["cpg_feedback"] = json.loads(cpg_stats[-1]).get("feedback")
+        report["cpg_feedback"] = cpg_stats.get("feedback")
     if relay is not None:
-        relay_stats = re.findall(r"stats (\{.*\})", run.logs.get("relay_node", ""))
-        report["relay"] = json.loads(relay_stats[-1])["topics"] if relay_stats else None
+        report["relay"] = run.stats.get("relay_node", {}).get("topics")
     if record:
         report["bag"] = str((out / f"{BAG_NAME}.mcap").resolve())
     if schedule:
