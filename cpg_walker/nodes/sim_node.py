@@ -353,7 +353,8 @@ class SimNode(Node):
                                f"{self.sim.max_tilt_deg} deg"),
             ("late_commands", self.late), ("late_recent", self.late_recent),
             ("late_waited", self.late_waited), ("late_held", self.late_held), ("resends", self.resends),
-            ("torques_rejected", self.torques_rejected))]
+            ("torques_rejected", self.torques_rejected), ("servo_hold", self.servo.active),
+            ("servo_holds", self.servo.entries))]
         msg = DiagnosticArray(status=[st])
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
         self.pub_diag.publish(msg)
