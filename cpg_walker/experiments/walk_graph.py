@@ -77,8 +77,8 @@ def parse_schedule(text: str) -> list[tuple[float, float, float]]:
 
 class ParameterSchedule:
     """Sends each (t, zeta, alpha) to /cpg/set_parameters when /clock reaches t, from a thread with its own
-    rclpy context on the graph's domain; ``sent`` records (t, the /clock time it was sent at, accepted,
-    the node's reason)."""
+    probe (graph/probe.py) on the graph's domain; ``sent`` records (t, the /clock time it was sent at,
+    accepted, the node's reason)."""
 
     def __init__(self, domain_id: int, schedule: list[tuple[float, float, float]]):
         self.domain_id, self.todo = domain_id, list(schedule)
@@ -95,24 +95,19 @@ class ParameterSchedule:
         self._thread.join(timeout=30.0)
 
     def _run(self) -> None:
-        import rclpy
         from rcl_interfaces.msg import Parameter
         from rcl_interfaces.srv import SetParameters
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
 
+        from cpg_walker.graph.probe import Probe
         from cpg_walker.graph.ros2cli import to_parameter_value
 
-        ctx = rclpy.Context()
-        rclpy.init(context=ctx, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node("walk_schedule", context=ctx, start_parameter_services=False)
-        executor = SingleThreadedExecutor(context=ctx)
-        executor.add_node(node)
+        probe = Probe(self.domain_id, "walk_schedule", parameter_services=False)
+        executor = probe.executor
         clock = [-1.0]
-        node.create_subscription(Clock, ifc.CLOCK, lambda m: clock.__setitem__(
+        probe.subscribe(ifc.CLOCK, Clock, lambda m: clock.__setitem__(
             0, max(clock[0], m.clock.sec + m.clock.nanosec * 1e-9)), 100)
-        client = node.create_client(SetParameters, "/cpg/set_parameters")
+        client = probe.node.create_client(SetParameters, "/cpg/set_parameters")
         pending = None
         try:
             while not self._stop.is_set() and (self.todo or pending is not None):
@@ -136,9 +131,7 @@ class ParameterSchedule:
         except Exception as exc:  # reported in walk.json; the walk itself goes on
             self.error = f"{type(exc).__name__}: {exc}"
         finally:
-            executor.shutdown()
-            node.destroy_node()
-            rclpy.try_shutdown(context=ctx)
+            probe.close()
 
 
 #: cpg_node's log line for a modulation command (nodes/cpg_node.py ``_command``).

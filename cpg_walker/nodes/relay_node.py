@@ -7,8 +7,9 @@ dropping a fraction ``loss`` (seeded) and delaying each by ``delay`` + U(0, ``ji
 kept (nodes/lossy_link.py). The consumers subscribe to the relay's outputs through remaps (``CONSUMERS``,
 ``consumer_remaps``: pid_node's /joint_targets and /joint_states, cpg_node's /imu); the publishers are
 untouched. ``loss``, ``delay`` and ``jitter`` are settable at run time; invalid values are refused with the
-reason. The run statistics at exit (the ``stats_file`` parameter's JSON) hold, per topic, the counters and the measured delay; while
-messages flow, /diagnostics says the same every ``diagnostics_period`` wall seconds.
+reason. The run statistics at exit (the ``stats_file`` parameter's JSON) hold, per topic, the counters
+and the measured delay; while messages flow, /diagnostics says the same every ``diagnostics_period``
+wall seconds.
 
 The delay is wall-clock time: meaningful in realtime pacing; in lockstep pacing it only slows the loop
 down (the sim waits for every answer), and a dropped message is ridden out by the sim's re-send
