@@ -22,6 +22,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO
 
+from cpg_walker.graph import probe
 from cpg_walker.nodes import interface as ifc
 
 #: Wall s for node processes to start and be discovered (imports, numba, DDS discovery): took up to ~25 s
@@ -102,114 +103,36 @@ def kill_nodes(domain: int) -> list[int]:
 
 # ------------------------------------------------------------------------------------------ probe
 
-class Probe:
-    """An rclpy node in the test process, on the graph's domain, that records what it receives."""
+class Probe(probe.Probe):
+    """The package's probe (cpg_walker/graph/probe.py) named ``probe``, with these tests' deadlines; a
+    wait that runs out is an AssertionError."""
 
-    def __init__(self, domain_id: int):
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
+    Timeout = AssertionError
 
-        self.ctx = rclpy.Context()
-        rclpy.init(context=self.ctx, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("probe", context=self.ctx)
-        self.executor = SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
-        self.received: dict[str, list] = {}
-        self._param_clients: dict[str, object] = {}
-
-    def listen(self, topic: str, msg_type, qos=50) -> None:
-        self.received[topic] = []
-        self.node.create_subscription(msg_type, topic, lambda m: self.received[topic].append(
-            (time.monotonic(), m)), qos)
-
-    def spin_for(self, seconds: float, until=None) -> bool:
-        """Spin ``seconds`` wall s, or until ``until()``; whether ``until()`` came true (True without it)."""
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.01)
-            if until is not None and until():
-                return True
-        return until is None
+    def __init__(self, domain_id: int, name: str = "probe", **options):
+        super().__init__(domain_id, name, **options)
 
     def wait(self, until: Callable[[], bool], what: str | Callable[[], str], timeout: float = ANSWER_S,
              each: Callable[[], None] | None = None) -> None:
-        """Spin until ``until()``; AssertionError ``what`` (text, or a function giving it) when ``timeout``
-        wall s pass first. ``each()``, if given, runs every 10 ms meanwhile (e.g. to keep publishing)."""
-        now = time.monotonic()
-        end, next_each = now + timeout, now
-        while not until():
-            now = time.monotonic()
-            if now > end:
-                raise AssertionError(f"not within {timeout:g} s: {what() if callable(what) else what}")
-            if each is not None and now >= next_each:
-                each()
-                next_each = now + 0.01
-            self.executor.spin_once(timeout_sec=0.01)
+        super().wait(until, what, timeout, each)
 
-    def wait_endpoints(self, topic: str, publishers: int = 1, subscribers: int = 1) -> None:
-        """Wait until the graph shows at least ``publishers`` and ``subscribers`` on ``topic`` (this probe's
-        own included). Before a sim starts its clock: a node publishes each tick's message once, so an
-        endpoint pair still being matched when the first tick comes would lose it."""
-        self.wait(lambda: self.node.count_publishers(topic) >= publishers
-                  and self.node.count_subscribers(topic) >= subscribers,
-                  lambda: f"{topic}: {self.node.count_publishers(topic)} publishers, "
-                          f"{self.node.count_subscribers(topic)} subscribers", START_S)
+    def wait_endpoints(self, topic: str, publishers: int = 1, subscribers: int = 1,
+                       timeout: float = START_S) -> None:
+        """Before a sim starts its clock: a node publishes each tick's message once, so an endpoint pair
+        still being matched when the first tick comes would lose it."""
+        super().wait_endpoints(topic, publishers, subscribers, timeout)
 
     def call(self, srv_type, name: str, timeout: float = ANSWER_S):
-        client = self.node.create_client(srv_type, name)
-        assert client.wait_for_service(timeout_sec=timeout), f"service {name} not available"
-        future = client.call_async(srv_type.Request())
-        self.wait(future.done, f"an answer from {name}", timeout)
-        return future.result()
+        return super().call(srv_type, name, timeout)
 
     def set_param(self, node: str, name: str, value, timeout: float = START_S):
-        """Set one parameter of ``/node`` through its set_parameters service; the SetParametersResult.
-        ``value``: a float (sent as a double) or a ready rcl_interfaces ParameterValue. ``timeout``: for
-        the service to show up (the node may still be starting)."""
-        from rcl_interfaces.msg import Parameter
-        from rcl_interfaces.srv import SetParameters
-
-        client = self._param_clients.get(node)
-        if client is None:
-            client = self.node.create_client(SetParameters, f"/{node}/set_parameters")
-            assert client.wait_for_service(timeout_sec=timeout), f"/{node}/set_parameters not available"
-            self._param_clients[node] = client
-        value = value if not isinstance(value, float | int) else double(value)
-        future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
-        self.wait(future.done, f"an answer setting {node}.{name}")
-        return future.result().results[0]
+        return super().set_param(node, name, value, timeout, ANSWER_S)
 
     def get_params(self, node: str, names: list[str]) -> list:
-        """The ParameterValues of ``names`` of ``/node`` through its get_parameters service."""
-        from rcl_interfaces.srv import GetParameters
-
-        get = self.node.create_client(GetParameters, f"/{node}/get_parameters")
-        assert get.wait_for_service(timeout_sec=START_S), f"/{node}/get_parameters not available"
-        future = get.call_async(GetParameters.Request(names=names))
-        self.wait(future.done, f"an answer from /{node}/get_parameters")
-        return list(future.result().values)
-
-    def close(self) -> None:
-        import rclpy
-
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.ctx)
+        return super().get_params(node, names, START_S)
 
 
-def double(x: float):
-    """A double ParameterValue."""
-    from rcl_interfaces.msg import ParameterType, ParameterValue
-
-    return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(x))
-
-
-def string(s: str):
-    """A string ParameterValue."""
-    from rcl_interfaces.msg import ParameterType, ParameterValue
-
-    return ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=s)
+double, string = probe.double, probe.string
 
 
 # --------------------------------------------------------------------------------------- watchdog

@@ -116,6 +116,9 @@ def test_the_servos_release_re_enters_the_gait() -> None:
     d.servo_hold(False)
     d.clock(60 * MS)
     assert d.reentries == 1 and out.said("the servos were released at 0.060 s")
+    status = d.status(60 * MS)  # the same as machine-readable /diagnostics values
+    assert (status["reentries"], status["reentry_cause"], status["rejoined_at_s"], status["servos_held"],
+            status["clock_resets"]) == ("1", "the servos were released", "0.060", "false", "0")
 
 
 def test_a_stray_tick_is_dropped_a_confirmed_jump_taken_and_a_restarted_sim_starts_over() -> None:

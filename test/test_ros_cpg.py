@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import json
 import math
-import re
 
 import numpy as np
 import pytest
 from ros_helpers import ANSWER_S, START_S, SimWatchdog, double, sim_deadline, string
 
+from cpg_walker.graph.processes import read_stats, stats_path
 from cpg_walker.nodes import interface as ifc
 from cpg_walker.walker.controller import DOFS
 
@@ -100,8 +100,7 @@ def test_60s_lockstep_walk_is_deterministic(tmp_path, ros_domain):
     assert report["zeta"] == 1.0 and report["feedback"] is False
     assert report["graph"]["torque_age_s"]["max"] == 0.0  # every period used its own command
     assert (tmp_path / "walk60" / "walk.json").exists()
-    stats = json.loads(re.findall(r"stats (\{.*\})", (tmp_path / "walk60" / "graph_logs" / "cpg_node.log")
-                                  .read_text())[-1])["tick"]
+    stats = read_stats(stats_path(tmp_path / "walk60" / "graph_logs", "cpg_node"))["tick"]
     assert stats["ticks"] == 30000  # one per control period (its wall timing: the benchmark's graph section)
     with SimWatchdog(ros_domain):
         run_graph_walk(tmp_path / "walk20", duration=20.0, feedback=False, timeout=sim_deadline(20.0))

@@ -74,12 +74,10 @@ def _finish(graph, record, duration: float):
 
     assert graph.wait("sim_node", timeout=120.0 + 20.0 * duration) == 0, graph.procs["sim_node"].log()[-2000:]
     graph.stop_all()
-    stats = {}
-    for name, proc in graph.procs.items():
+    for proc in graph.procs.values():
         log = proc.log()
         assert "Traceback" not in log, log[-3000:]
-        found = re.findall(r"stats (\{.*\})", log)
-        stats[name] = json.loads(found[-1]) if found else {}
+    stats = {name: graph.stats(name) for name in graph.procs}  # each node's stats file
     rec = RunRecord.load(record)
     return record_to_result(rec), rec.stats, stats
 

@@ -22,7 +22,6 @@ executor ``spin_once`` versus the direct wait-set poll the nodes use).
 from __future__ import annotations
 
 import json
-import re
 import tempfile
 import time
 from pathlib import Path
@@ -31,11 +30,6 @@ import numpy as np
 
 from cpg_walker.nodes import interface as ifc
 from cpg_walker.nodes.interface import PACINGS
-
-
-def _node_stats(log: str) -> dict:
-    m = re.findall(r"stats (\{.*\})", log)
-    return json.loads(m[-1]) if m else {}
 
 
 def graph_run(pacing: str, duration: float, target: str | None = None, control_period: float | None = None,
@@ -52,7 +46,7 @@ def graph_run(pacing: str, duration: float, target: str | None = None, control_p
                     timeout=60 + 20 * duration, tag=tag)
     rec, s = run.record, run.record.stats
     cpu = {"sim_node": round(s["cpu_s"] / s["wall_s"], 3) if s["wall_s"] else None}
-    node_stats = {name: _node_stats(log) for name, log in run.logs.items() if name != "sim_node"}
+    node_stats = {name: stats for name, stats in run.stats.items() if name != "sim_node"}
     for name, stats in node_stats.items():
         cpu[name] = stats.get("cpu_fraction")
     out = {
@@ -262,12 +256,10 @@ def third_process_rates(window: float = 2.0, start_timeout: float = 120.0) -> di
     torque with the same stamp) was received too."""
     import os
 
-    import rclpy
     from nav_msgs.msg import Odometry
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import JointState
 
+    from cpg_walker.graph.probe import Probe
     from cpg_walker.graph.processes import Graph
     from cpg_walker.nodes.messages import stamp_ns
 
@@ -275,14 +267,11 @@ def third_process_rates(window: float = 2.0, start_timeout: float = 120.0) -> di
     got: dict[str, list[int]] = {t: [] for t in topics}
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     with Graph(Path(tempfile.mkdtemp(prefix="bench_rates_"))) as g:
-        ctx = rclpy.Context()
-        rclpy.init(context=ctx, domain_id=g.domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node("bench_rates", context=ctx)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(node)
+        probe = Probe(g.domain_id, "bench_rates")
+        ex = probe.executor
         try:
             for topic, cls in topics.items():
-                node.create_subscription(cls, topic, lambda m, t=topic: got[t].append(stamp_ns(m)), 2000)
+                probe.subscribe(topic, cls, lambda m, t=topic: got[t].append(stamp_ns(m)), 2000)
             g.start("pid_node")
             g.start("sim_node", pacing="realtime")
             end = time.monotonic() + start_timeout
@@ -297,9 +286,7 @@ def third_process_rates(window: float = 2.0, start_timeout: float = 120.0) -> di
                 ex.spin_once(timeout_sec=0.01)
             wall = time.monotonic() - t0
         finally:
-            ex.shutdown()
-            node.destroy_node()
-            rclpy.try_shutdown(context=ctx)
+            probe.close()
     states, torques = set(got[ifc.JOINT_STATES]), set(got[ifc.JOINT_TORQUES])
     return {"window_wall_s": round(wall, 3),
             **{f"{t.strip('/').replace('/', '_')}_hz": round(len(v) / wall, 1) for t, v in got.items()},

@@ -27,7 +27,7 @@ import threading
 import time
 from pathlib import Path
 
-from cpg_walker.experiments.bench_graph import _node_stats, check_graph_run, checked
+from cpg_walker.experiments.bench_graph import check_graph_run, checked
 from cpg_walker.nodes import interface as ifc
 
 #: (name, attached subscribers, CPU-bound process) of the full run; ``--quick`` runs QUICK_SCENARIOS.
@@ -48,15 +48,15 @@ def _tools(n: int) -> list[list[str]]:
     return cmds[:n]
 
 
-def _wait_for_log(proc, text: str, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if text in proc.log():
-            return True
-        if proc.popen.poll() is not None:
-            return False
-        time.sleep(0.1)
-    return False
+def _wait_cpg_loaded(g, timeout: float) -> bool:
+    """Wait until cpg_node has loaded its CPG (then it subscribes to /sim/servo_hold, its last topic) or
+    has exited; whether it did."""
+    from cpg_walker.graph.probe import Probe
+
+    cpg, proc = ifc.NODE_NAMES[ifc.CPG_NODE], g.procs["cpg_node"]
+    with Probe(g.domain_id, "bench_realtime_wait", parameter_services=False) as probe:
+        return probe.spin_for(timeout, until=lambda: probe.subscribed(cpg, ifc.SIM_SERVO_HOLD)
+                              or proc.popen.poll() is not None) and proc.popen.poll() is None
 
 
 def _cpu_s(pid: int) -> float | None:
@@ -85,7 +85,7 @@ def scenario_run(subscribers: int, cpu_load: bool, duration: float, work: Path, 
             started.append(("cpu_load", p, Path("/dev/null")))
             procs.append(p)
         if subscribers:
-            _wait_for_log(g.procs["cpg_node"], "CPG N=", 120.0)
+            _wait_cpg_loaded(g, 120.0)
             time.sleep(ATTACH_AFTER_S)
             for i, cmd in enumerate(_tools(subscribers)):
                 out = g.log_dir / f"watcher_{i}.log"
@@ -117,8 +117,8 @@ def scenario_run(subscribers: int, cpu_load: bool, duration: float, work: Path, 
         sampling.set()
         sampler.join()
     rec, s = run.record, run.record.stats
-    cpg = _node_stats(run.logs["cpg_node"])
-    pid = _node_stats(run.logs["pid_node"])
+    cpg = run.stats.get("cpg_node", {})
+    pid = run.stats.get("pid_node", {})
     periods = max(1, int(s["periods"]))
     tick = cpg.get("tick", {})
     received = {}

@@ -175,7 +175,7 @@ def _distinct_domains(R: int) -> list[int]:
 def _graphs(counts: tuple[int, ...], parallel_counts: tuple[int, ...], duration: float, work: Path) -> dict:
     """Lockstep CPG-walk graphs, each in its own domain: R = max(counts) run one after the other (each
     timed: the serial wall for R is that of the first R), then R at once for each R in ``parallel_counts``."""
-    from cpg_walker.experiments.bench_graph import _node_stats, controller_ticks
+    from cpg_walker.experiments.bench_graph import controller_ticks
     from cpg_walker.experiments.replay_graph import run_graph
 
     errors: list[str] = []
@@ -187,7 +187,7 @@ def _graphs(counts: tuple[int, ...], parallel_counts: tuple[int, ...], duration:
                             timeout=120 + 30 * duration, tag=f"{mode}_{k}", domain_id=domain)
             rtf = float(run.record.stats["real_time_factor"])
             rec = run.record
-            stats = {n: _node_stats(log) for n, log in run.logs.items() if n != "sim_node"}
+            stats = {n: st for n, st in run.stats.items() if n != "sim_node"}
             distance = round(float(rec.base_xy[-1][0] - rec.base_xy[0][0]), 4) if rec.base_xy else None
             # walking=False: these runs are 1 sim s of the recorded opening steps, which move the base
             # only millimetres; they time start-up and throughput, so fall and ticks are what must hold

@@ -45,14 +45,12 @@ def _yaw(q) -> float:
 def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = False,
                 wall_limit_s: float = 1800.0) -> dict:
     """Run the plan (module docstring) against a graph; write and return the measurements."""
-    import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Bool
 
+    from cpg_walker.graph.probe import Probe
     from cpg_walker.graph.processes import env_domain_id, isolated_env, quiet_domain_id
     from cpg_walker.graph.runner import resolve_domain
 
@@ -69,9 +67,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
                str(START_S + total), "--domain-id", str(domain), "--log-dir", str(out / "logs")]
         proc = subprocess.Popen(cmd, env=isolated_env(domain), stdout=open(out / "graph.log", "w"),
                                 stderr=subprocess.STDOUT, start_new_session=True)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node("drive_check", context=ctx, start_parameter_services=False)
+    probe = Probe(domain, "drive_check", parameter_services=False)
     odom: list[tuple[float, float, float, float]] = []
     cmd_state: list[tuple[float, str]] = []
     fallen: list[float] = []  # sim s (the newest odometry) when /sim/fallen said true
@@ -92,12 +88,11 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
                 if "cmd_vel" in v:
                     cmd_state.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, v["cmd_vel"]))
 
-    node.create_subscription(Odometry, ifc.ODOM_GROUND_TRUTH, on_odom, 200)
-    node.create_subscription(DiagnosticArray, ifc.DIAGNOSTICS, on_diag, 50)
-    node.create_subscription(Bool, ifc.SIM_FALLEN, on_fallen, ifc.latched_qos())
-    pub = node.create_publisher(Twist, ifc.CMD_VEL, 10)
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(node)
+    probe.subscribe(ifc.ODOM_GROUND_TRUTH, Odometry, on_odom, 200)
+    probe.subscribe(ifc.DIAGNOSTICS, DiagnosticArray, on_diag, 50)
+    probe.subscribe(ifc.SIM_FALLEN, Bool, on_fallen, ifc.latched_qos())
+    pub = probe.node.create_publisher(Twist, ifc.CMD_VEL, 10)
+    executor = probe.executor
     sent: list[tuple[float, float, float]] = []
     t0 = None
     end_wall = time.monotonic() + wall_limit_s
@@ -136,9 +131,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
                 print(f"drive-check --graph: sim {t:.1f} / {t0 + total:.1f} s", file=sys.stderr, flush=True)
                 last_report = time.monotonic()
     finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        probe.close()
         if proc is not None:
             if proc.poll() is None:
                 import signal

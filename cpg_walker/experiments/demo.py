@@ -79,9 +79,9 @@ def demo_schedule(duration: float, start_s: float) -> list[tuple[float, float, f
 # ----------------------------------------------------------------------------------------- live status
 
 class GraphStatus:
-    """The run's one-line status, from the graph's topics, in a thread with its own rclpy context on the
-    graph's domain: sim time (/clock), real-time factor (sim s per wall s over the last ~5 wall s), forward
-    speed and heading (/odom/ground_truth, over the last 2 sim s), the ζ and α the oscillators use
+    """The run's one-line status, from the graph's topics, in a thread with its own probe (graph/probe.py)
+    on the graph's domain: sim time (/clock), real-time factor (sim s per wall s over the last ~5 wall s),
+    forward speed and heading (/odom/ground_truth, over the last 2 sim s), the ζ and α the oscillators use
     (cpg_node's /diagnostics) and whether the robot has fallen (/sim/fallen). ``show(line, sim_s)`` is
     called every ``every_s`` wall s."""
 
@@ -149,38 +149,30 @@ class GraphStatus:
                 self.cpg = {kv.key: kv.value for kv in st.values}
 
     def _run(self, domain_id: int) -> None:
-        import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from nav_msgs.msg import Odometry
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Bool
 
-        ctx = rclpy.Context()
-        rclpy.init(context=ctx, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node("demo_status", context=ctx, start_parameter_services=False)
-        executor = SingleThreadedExecutor(context=ctx)
-        executor.add_node(node)
-        latched = ifc.latched_qos()
-        node.create_subscription(Clock, ifc.CLOCK, self._on_clock, 10)
-        node.create_subscription(Odometry, ifc.ODOM_GROUND_TRUTH, self._on_odom, 10)
-        node.create_subscription(DiagnosticArray, ifc.DIAGNOSTICS, self._on_diagnostics, 10)
-        node.create_subscription(Bool, ifc.SIM_FALLEN, lambda m: setattr(self, "fallen", bool(m.data)),
-                                 latched)
+        from cpg_walker.graph.probe import Probe
+
+        probe = Probe(domain_id, "demo_status", parameter_services=False)
+        probe.subscribe(ifc.CLOCK, Clock, self._on_clock, 10)
+        probe.subscribe(ifc.ODOM_GROUND_TRUTH, Odometry, self._on_odom, 10)
+        probe.subscribe(ifc.DIAGNOSTICS, DiagnosticArray, self._on_diagnostics, 10)
+        probe.subscribe(ifc.SIM_FALLEN, Bool, lambda m: setattr(self, "fallen", bool(m.data)),
+                        ifc.latched_qos())
         shown = 0.0
         try:
             while not self._stop.is_set():
-                executor.spin_once(timeout_sec=0.05)
+                probe.executor.spin_once(timeout_sec=0.05)
                 if time.monotonic() - shown >= self.every_s:
                     shown = time.monotonic()
                     self.show(self.line(), self.sim_s)
         except Exception as exc:  # the status is a view: the run goes on without it
             self.error = f"{type(exc).__name__}: {exc}"
         finally:
-            executor.shutdown()
-            node.destroy_node()
-            rclpy.try_shutdown(context=ctx)
+            probe.close()
 
 
 class StatusDisplay:

@@ -14,15 +14,15 @@ pid_node and cpg_node take for a reset (runtime.CLOCK_RESET_S) and start over.
 from __future__ import annotations
 
 import json
-import math
 import os
 import signal
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from cpg_walker.errors import InputError
+from cpg_walker.graph.probe import Probe, RobotTrack
 from cpg_walker.nodes import interface as ifc
 
 #: Sim s of odometry the walking speed is measured over (about two strides).
@@ -33,8 +33,8 @@ WALKING_FRACTION = 0.5
 FAULT_ORDER = ("cpg_node", "pid_node", "sim_node")
 
 
-#: The log line of a restarted node that says it is up (cpg_node: re-entering the gait).
-UP_LOG = {"cpg_node": "re-entering the gait", "pid_node": "PID on 25 joints", "sim_node": "pacing="}
+#: The /diagnostics status of each node that publishes one (FaultGraph.restart forgets the dead node's).
+STATUS = {"cpg_node": "cpg_walker/cpg", "sim_node": "cpg_walker/sim"}
 
 
 def _no_signals():
@@ -52,44 +52,21 @@ class FaultResult:
     fall_time_s: float | None  # sim time (of the sim run then going; after a sim fault, the new one's)
     walking_again_s: float | None  # sim s from the kill until walking again (sim fault: the new run's t)
     walking_again_wall_s: float | None  # wall s from the kill until walking again
-    up_at_s: float  # sim time the new node was up (its log line UP_LOG; sim fault: 0, the new run)
+    up_at_s: float  # sim time the new node was up (`FaultGraph.wait_up`; sim fault: 0, the new run)
     walking_after_up_s: float | None  # sim s from then until walking again (incl. the WINDOW_S)
     speed_before_mps: float
     speed_after_mps: float | None  # over the WINDOW_S at which it counted as walking again
     sim_reset: bool = False  # the sim restarted at t = 0 (the others saw time go back)
 
 
-@dataclass
-class Odometry:
-    """/odom/ground_truth (t, x, y) of the current sim run, and the latched /sim/fallen."""
-
-    samples: list[tuple[float, float, float]] = field(default_factory=list)
-    runs: int = 0  # sim runs seen (a restarted sim's time goes back)
-    fell_at: float | None = None
-
-    def add(self, t: float, x: float, y: float) -> None:
-        if self.samples and t < self.samples[-1][0] - 0.5:
-            self.samples, self.fell_at = [], None
-            self.runs += 1
-        self.samples.append((t, x, y))
-
-    @property
-    def t(self) -> float:
-        return self.samples[-1][0] if self.samples else 0.0
-
-    def speed(self, window_s: float = WINDOW_S, until: float | None = None) -> float | None:
-        """Planar speed (m/s) over the window_s sim s ending at ``until`` (default: the newest sample)."""
-        end = self.t if until is None else until
-        pts = [s for s in self.samples if end - window_s - 1e-9 <= s[0] <= end + 1e-9]
-        if len(pts) < 2 or pts[-1][0] - pts[0][0] < 0.9 * window_s:
-            return None
-        (t0, x0, y0), (t1, x1, y1) = pts[0], pts[-1]
-        return math.hypot(x1 - x0, y1 - y0) / (t1 - t0)
+#: /odom/ground_truth and /sim/fallen as the monitor tracks them (graph/probe.py).
+Odometry = RobotTrack
 
 
 class FaultGraph:
-    """The walking graph and a monitor node on its domain; `kill` / `restart` a node; wait on sim time.
-    A context manager that stops every process it started."""
+    """The walking graph and a monitor (graph/probe.py ``Probe``: /odom/ground_truth, /sim/fallen,
+    /diagnostics) on its domain; `kill` / `restart` a node; wait on sim time and on what the nodes say on
+    /diagnostics. A context manager that stops every process it started."""
 
     def __init__(self, out_dir: str | Path, zeta: float = 1.0, domain_id: int | None = None,
                  say=None, pacing: str = "realtime"):
@@ -99,11 +76,12 @@ class FaultGraph:
         self.graph = Graph(self.out / "logs", domain_id=domain_id)
         self.zeta = float(zeta)
         self.pacing = pacing
-        self.odom = Odometry()
+        self.odom = RobotTrack()  # the probe's, once started
         self.say = say or (lambda text: print(f"faults: {text}", file=sys.stderr, flush=True))
         self.restarts: dict[str, int] = {}
-        self._ctx = self._node = self._executor = None
+        self.probe: Probe | None = None
         self._holders: list = []  # (context, node): participants holding a killed node's DDS ports
+        self._up_besides: set[bytes] = set()  # a restarted pid_node's predecessor's subscription ids
 
     # -------------------------------------------------------------- processes
     def params(self, node: str) -> dict:
@@ -116,39 +94,30 @@ class FaultGraph:
 
     def start(self) -> None:
         """pid_node and cpg_node, then the sim (realtime) once cpg_node is up, as users start the graph."""
-        import rclpy
-        from nav_msgs.msg import Odometry as OdomMsg
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
-        from std_msgs.msg import Bool
-
         keys = ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOCALHOST_ONLY")
         self._saved_env = {k: os.environ.get(k) for k in keys}
         os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # as the graph's nodes (Graph.env)
         os.environ.pop("ROS_LOCALHOST_ONLY", None)
-        self._ctx = rclpy.Context()
-        rclpy.init(context=self._ctx, domain_id=self.graph.domain_id,
-                   signal_handler_options=SignalHandlerOptions.NO)
-        self._node = rclpy.create_node("faults_monitor", context=self._ctx, start_parameter_services=False)
-        self._executor = SingleThreadedExecutor(context=self._ctx)
-        self._executor.add_node(self._node)
-        self._node.create_subscription(OdomMsg, ifc.ODOM_GROUND_TRUTH, self._on_odom, 100)
-        latched = ifc.latched_qos()
-        self._node.create_subscription(Bool, ifc.SIM_FALLEN, self._on_fallen, latched)
+        self.probe = Probe(self.graph.domain_id, "faults_monitor", robot=True, diagnostics=True,
+                           parameter_services=False)
+        self.odom = self.probe.robot
         self.graph.start("pid_node", **self.params("pid_node"))
         self.graph.start("cpg_node", **self.params("cpg_node"))
-        self.graph.wait_for_log("cpg_node", "CPG N=", 600.0)  # its own line (a loaded machine: minutes)
-        self.wait(lambda: self._node.count_publishers(ifc.JOINT_TRAJECTORY) > 0, 300.0, "cpg_node up")
+        # cpg_node is up when its CPG is loaded: then it subscribes to /sim/servo_hold, its last topic (a
+        # loaded machine: minutes)
+        cpg = ifc.NODE_NAMES[ifc.CPG_NODE]
+        self.wait(lambda: self.probe.subscribed(cpg, ifc.SIM_SERVO_HOLD), 600.0, "cpg_node's CPG loaded",
+                  node="cpg_node")
+        self.wait(lambda: self.probe.node.count_publishers(ifc.JOINT_TRAJECTORY) > 0, 300.0, "cpg_node up")
         self.graph.start("sim_node", **self.params("sim_node"))
 
-    def _on_odom(self, msg) -> None:
-        s = msg.header.stamp
-        p = msg.pose.pose.position
-        self.odom.add(s.sec + s.nanosec * 1e-9, p.x, p.y)
+    def status(self, node: str) -> dict[str, str]:
+        """The latest /diagnostics key-values of ``node`` (cpg_node, sim_node; {} before any)."""
+        return self.probe.status(STATUS[node])
 
-    def _on_fallen(self, msg) -> None:
-        if msg.data and self.odom.fell_at is None:
-            self.odom.fell_at = self.odom.t
+    def value(self, node: str, key: str, default: float | None = None) -> float | None:
+        """A numeric /diagnostics value of ``node`` ('none' or not yet said: ``default``)."""
+        return self.probe.value(STATUS[node], key, default)
 
     def kill(self, node: str) -> None:
         """SIGKILL the node's process group (no clean-up, as a crash); then take its DDS ports
@@ -180,6 +149,10 @@ class FaultGraph:
         """Start ``node`` again with the same parameters (its previous log kept as <node>.<n>.log)."""
         n = self.restarts.get(node, 0) + 1
         self.restarts[node] = n
+        if node in STATUS:  # what the dead node said is not the new one's
+            self.probe.forget(STATUS[node])
+        if node == "pid_node":  # its dead predecessor's subscription may linger in the graph
+            self._up_besides = self.probe.subscription_gids(ifc.NODE_NAMES[node], ifc.JOINT_STATES)
         log = self.graph.procs[node].log_path
         if log.exists():
             log.rename(log.with_name(f"{node}.{n}.log"))
@@ -187,21 +160,37 @@ class FaultGraph:
 
     # -------------------------------------------------------------- waiting
     def spin(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self._executor.spin_once(timeout_sec=0.01)
+        self.probe.spin_for(seconds)
 
-    def wait(self, until, timeout: float, what: str) -> None:
-        """Spin until ``until()``; TimeoutError naming ``what`` (and the sim's log tail) after ``timeout``
-        wall s (a hang guard, not a speed claim)."""
+    def wait(self, until, timeout: float, what: str, node: str = "sim_node") -> None:
+        """Spin until ``until()``; TimeoutError naming ``what`` (and ``node``'s log tail) after ``timeout``
+        wall s (a hang guard, not a speed claim); RuntimeError if ``node`` exits meanwhile."""
+        proc = self.graph.procs.get(node)
+
+        def tail() -> str:
+            return proc.log()[-1500:] if proc else ""
+
         end = time.monotonic() + timeout
         while not until():
+            if proc is not None and proc.popen.poll() is not None:
+                raise RuntimeError(f"{what}: {node} exited with status {proc.popen.returncode}; log tail:\n"
+                                   f"{tail()}")
             if time.monotonic() > end:
-                sim = self.graph.procs.get("sim_node")
-                tail = sim.log()[-1500:] if sim else ""
                 raise TimeoutError(f"{what}: not within {timeout} wall s (sim at {self.odom.t:.2f} s); "
-                                   f"sim log tail:\n{tail}")
-            self._executor.spin_once(timeout_sec=0.01)
+                                   f"{node} log tail:\n{tail()}")
+            self.probe.executor.spin_once(timeout_sec=0.01)
+
+    def up(self, node: str) -> bool:
+        """Whether a restarted ``node`` is up: cpg_node has re-entered the gait (/diagnostics
+        ``reentries``), pid_node has its own /joint_states subscription (not its dead predecessor's)."""
+        if node == "cpg_node":
+            return self.value("cpg_node", "reentries", 0) >= 1
+        if node == "pid_node":
+            return self.probe.subscribed(ifc.NODE_NAMES[node], ifc.JOINT_STATES, self._up_besides)
+        return bool(self.status(node))
+
+    def wait_up(self, node: str, timeout: float) -> None:
+        self.wait(lambda: self.up(node), timeout, f"the restarted {node} up", node=node)
 
     def wait_sim(self, t: float, timeout: float = 600.0) -> None:
         run = self.odom.runs
@@ -240,12 +229,8 @@ class FaultGraph:
 
                 holder.destroy_node()
                 rclpy.try_shutdown(context=ctx)
-            if self._node is not None:
-                self._node.destroy_node()
-            if self._ctx is not None:
-                import rclpy
-
-                rclpy.try_shutdown(context=self._ctx)
+            if self.probe is not None:
+                self.probe.close()
             for k, v in getattr(self, "_saved_env", {}).items():
                 if v is None:
                     os.environ.pop(k, None)
@@ -276,7 +261,7 @@ def inject(g: FaultGraph, node: str, before: float, away_wall_s: float, recover_
         g.wait(lambda: g.odom.runs > runs, timeout, "the restarted sim's odometry")
         start, origin, limit = 0.0, 0.0, recover_s
     else:  # walking is measured from the moment the new node is up (not on the motion before)
-        g.graph.wait_for_log(node, UP_LOG[node], timeout)
+        g.wait_up(node, timeout)
         g.spin(0.2)  # the odometry that came meanwhile
         start, origin = g.odom.t, t_kill
         limit = start + recover_s

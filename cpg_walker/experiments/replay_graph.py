@@ -17,7 +17,7 @@ import json
 import subprocess
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +49,8 @@ def record_to_result(record):
 
 @dataclass
 class GraphRun:
-    """One finished run of the graph: the sim's record, wall time, CPU seconds and log of every node."""
+    """One finished run of the graph: the sim's record, wall time, CPU seconds, the log and the run
+    statistics (its stats file, graph/processes.py) of every node."""
 
     record: object  # robot.run_record.RunRecord
     target: str | None
@@ -58,6 +59,7 @@ class GraphRun:
     wall_s: float
     cpu_s: dict[str, float | None]
     logs: dict[str, str]
+    stats: dict[str, dict] = field(default_factory=dict)  # by node; {} for a node that wrote none
 
     def report(self, period_s: float | None) -> tuple[dict, object]:
         """replay.json's keys (``summarize`` of the record, stride ``period_s``), ``real_time_factor``,
@@ -155,13 +157,15 @@ def run_graph(
         cpu = {name: p.cpu_seconds() for name, p in g.procs.items() if name != "sim_node"}
         g.stop_all()
         logs = {name: p.log() for name, p in g.procs.items()}
+        stats = {name: g.stats(name) for name in g.procs}
     wall = time.monotonic() - started
     if status != 0 or not record_path.exists():
         raise RuntimeError(f"sim_node exited with status {status}; logs in {work / f'{tag}_logs'}; tail:\n"
                            f"{logs['sim_node'][-2000:]}")
     record = RunRecord.load(record_path)
     return GraphRun(record=record, target=target, pacing=pacing,
-                    control_period=float(record.stats["control_period_s"]), wall_s=wall, cpu_s=cpu, logs=logs)
+                    control_period=float(record.stats["control_period_s"]), wall_s=wall, cpu_s=cpu, logs=logs,
+                    stats=stats)
 
 
 def start_recorder(g: Graph, bag_dir: str | Path, timeout: float) -> None:

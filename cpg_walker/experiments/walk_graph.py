@@ -78,8 +78,8 @@ def parse_schedule(text: str) -> list[tuple[float, float, float]]:
 
 class ParameterSchedule:
     """Sends each (t, zeta, alpha) to /cpg/set_parameters when /clock reaches t, from a thread with its own
-    rclpy context on the graph's domain; ``sent`` records (t, the /clock time it was sent at, accepted,
-    the node's reason)."""
+    probe (graph/probe.py) on the graph's domain; ``sent`` records (t, the /clock time it was sent at,
+    accepted, the node's reason)."""
 
     def __init__(self, domain_id: int, schedule: list[tuple[float, float, float]]):
         self.domain_id, self.todo = domain_id, list(schedule)
@@ -96,24 +96,19 @@ class ParameterSchedule:
         self._thread.join(timeout=30.0)
 
     def _run(self) -> None:
-        import rclpy
         from rcl_interfaces.msg import Parameter
         from rcl_interfaces.srv import SetParameters
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
         from rosgraph_msgs.msg import Clock
 
+        from cpg_walker.graph.probe import Probe
         from cpg_walker.graph.ros2cli import to_parameter_value
 
-        ctx = rclpy.Context()
-        rclpy.init(context=ctx, domain_id=self.domain_id, signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node("walk_schedule", context=ctx, start_parameter_services=False)
-        executor = SingleThreadedExecutor(context=ctx)
-        executor.add_node(node)
+        probe = Probe(self.domain_id, "walk_schedule", parameter_services=False)
+        executor = probe.executor
         clock = [-1.0]
-        node.create_subscription(Clock, ifc.CLOCK, lambda m: clock.__setitem__(
+        probe.subscribe(ifc.CLOCK, Clock, lambda m: clock.__setitem__(
             0, max(clock[0], m.clock.sec + m.clock.nanosec * 1e-9)), 100)
-        client = node.create_client(SetParameters, "/cpg/set_parameters")
+        client = probe.node.create_client(SetParameters, "/cpg/set_parameters")
         pending = None
         try:
             while not self._stop.is_set() and (self.todo or pending is not None):
@@ -137,9 +132,7 @@ class ParameterSchedule:
         except Exception as exc:  # reported in walk.json; the walk itself goes on
             self.error = f"{type(exc).__name__}: {exc}"
         finally:
-            executor.shutdown()
-            node.destroy_node()
-            rclpy.try_shutdown(context=ctx)
+            probe.close()
 
 
 #: cpg_node's log line for a modulation command (nodes/cpg_node.py ``_command``).
@@ -266,12 +259,11 @@ def run_graph_walk(
         "n_oscillators": int(ctrl.net.N) if ctrl is not None else None,
         "cpg_file": cpg_file or "learned at start-up",
     }
-    cpg_stats = re.findall(r"stats (\{.*\})", run.logs.get("cpg_node", ""))
+    cpg_stats = run.stats.get("cpg_node")
     if cpg_stats:
-        report["cpg_feedback"] = json.loads(cpg_stats[-1]).get("feedback")
+        report["cpg_feedback"] = cpg_stats.get("feedback")
     if relay is not None:
-        relay_stats = re.findall(r"stats (\{.*\})", run.logs.get("relay_node", ""))
-        report["relay"] = json.loads(relay_stats[-1])["topics"] if relay_stats else None
+        report["relay"] = run.stats.get("relay_node", {}).get("topics")
     if record:
         report["bag"] = str((out / f"{BAG_NAME}.mcap").resolve())
     if schedule:

@@ -10,6 +10,9 @@ files pass it) and overrides; stopped with SIGINT, then SIGKILL.
 A node can be placed elsewhere (``Placement``): its command line run under a prefix (e.g. ``ip netns exec
 NS``, graph/netns.py) with environment overrides (e.g. its discovery peers).
 
+Every node writes its run statistics at exit to ``<log dir>/<node>.stats.json`` (its ``stats_file``
+parameter, which ``start`` sets): ``g.stats("cpg_node")`` reads them; nothing parses the log for them.
+
 Used by ``cpg-walker replay --graph``, ``cpg-walker walk``, ``cpg-walker two-hosts``, the benchmark and
 the multi-process tests.
 """
@@ -130,6 +133,22 @@ def param_arg(name: str, value: object) -> str:
     return f"{name}:={fmt(value)}"
 
 
+def stats_path(log_dir: str | Path, node: str) -> Path:
+    """Where ``Graph`` has ``node`` (an executable) write its run statistics: <log_dir>/<node>.stats.json."""
+    return Path(log_dir) / f"{node}.stats.json"
+
+
+def read_stats(path: str | Path) -> dict:
+    """A node's run statistics (the JSON its ``stats_file`` names); {} when it wrote none (still running,
+    killed, or it failed before its exit)."""
+    import json
+
+    try:
+        return json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        return {}
+
+
 @dataclass(frozen=True)
 class Placement:
     """Where a node process runs: ``prefix`` before its command line (e.g. ``ip netns exec NS``) and
@@ -192,9 +211,13 @@ class Graph:
     def start(self, node: str, remaps: Mapping[str, str] | None = None, **params: object) -> NodeProcess:
         """Start ``node`` with its parameters file and ``params`` overriding it (``push__force=[..]`` for
         ``push.force``); ``remaps``: topic names the node uses -> the ones it gets (``-r from:=to``); it
-        runs where its placement says."""
+        runs where its placement says. Its run statistics go to ``stats_path(log_dir, node)`` unless
+        ``stats_file`` is given (read them with ``stats``)."""
         place = self.placement.get(node, Placement())
         log_path = self.log_dir / f"{node}.log"
+        if node in NODES:
+            params.setdefault("stats_file", str(stats_path(self.log_dir, node).resolve()))
+            Path(str(params["stats_file"])).unlink(missing_ok=True)  # a previous run's are not this one's
         with open(log_path, "wb") as log:
             popen = subprocess.Popen([*place.prefix, *self.command(node, params, remaps)],
                                      env={**self.env, **place.env}, stdout=log,
@@ -228,6 +251,18 @@ class Graph:
         else:
             _signal_group(p.pid, signal.SIGKILL)  # stray children of an exited leader, if any
         return p.returncode
+
+    def stats(self, node: str) -> dict:
+        """The run statistics ``node`` wrote at exit (its stats file; {} when it wrote none)."""
+        return read_stats(self.stats_file(node))
+
+    def stats_file(self, node: str) -> Path:
+        """The path ``node``'s run statistics are written to (as started)."""
+        args = self.procs[node].popen.args
+        for i, arg in enumerate(args[:-1]):
+            if arg == "-p" and args[i + 1].startswith("stats_file:="):
+                return Path(args[i + 1].split(":=", 1)[1])
+        return stats_path(self.log_dir, node)
 
     def wait_for_log(self, node: str, text: str, timeout: float) -> None:
         """Wait until ``node``'s log holds ``text``; RuntimeError if it exits first, TimeoutError (with its

@@ -10,8 +10,6 @@ oscillators (the CPG's smoothed ζ/α), never a scaling of the output.
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Twist, WrenchStamped
@@ -37,7 +35,7 @@ from cpg_walker.nodes.params import by_name, declare_params
 from cpg_walker.nodes.runtime import (
     HotPath,
     Throttle,
-    exit_log,
+    exit_stats,
     gc_summary,
     parse_cli,
     run_main,
@@ -255,8 +253,8 @@ class CPGNode(Node):
 
     def on_exit(self) -> None:
         d = self.driver
-        exit_log(self, "stats " + json.dumps({**d.summary(), "gc": gc_summary(self),
-                                              "horizon_work": latency_summary(d.horizon_work)}))
+        exit_stats(self, {**d.summary(), "gc": gc_summary(self),
+                          "horizon_work": latency_summary(d.horizon_work)})
 
 
 def main(argv: list[str] | None = None) -> int:

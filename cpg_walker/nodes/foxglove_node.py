@@ -14,7 +14,6 @@ nodes through their parameter services (foxglove_params.py).
 
 from __future__ import annotations
 
-import json
 import math
 import struct
 import time
@@ -66,7 +65,7 @@ from cpg_walker.nodes.params import declare_params
 from cpg_walker.nodes.runtime import (
     HotPath,
     Throttle,
-    exit_log,
+    exit_stats,
     parse_cli,
     run_main,
     scheduling_request,
@@ -282,8 +281,8 @@ class FoxgloveNode(Node):
     def on_exit(self) -> None:
         self.server.stop()
         self.taker.destroy_node()
-        exit_log(self, "stats " + json.dumps({"cpu_s": round(time.process_time(), 2), "received": self.counts,
-                                              "touchdowns": self.contacts.detector.events}))
+        exit_stats(self, {"cpu_s": round(time.process_time(), 2), "received": self.counts,
+                          "touchdowns": self.contacts.detector.events})
 
 
 def frame_transform(stamp: Timestamp, p) -> FrameTransform:

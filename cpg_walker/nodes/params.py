@@ -88,6 +88,14 @@ SCHEDULING = (
 )
 
 
+#: The run statistics every node writes at exit (runtime.exit_stats): read by the graph tooling
+#: (graph/processes.py ``Graph.stats``), never parsed from the log.
+STATS = (
+    string("stats_file", "write the node's run statistics here as JSON at exit (a temporary file renamed "
+           "into place); '' = none", read_only=True),
+)
+
+
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
     """The ROS ParameterDescriptor of ``spec`` (type, description, read_only, range)."""
     if spec.type == "double":

@@ -10,7 +10,6 @@ docs/ROS_INTERFACE.md.
 
 from __future__ import annotations
 
-import json
 import time
 
 import numpy as np
@@ -26,7 +25,7 @@ from cpg_walker.nodes.params import declare_params, override_names
 from cpg_walker.nodes.runtime import (
     HotPath,
     Throttle,
-    exit_log,
+    exit_stats,
     gc_summary,
     parse_cli,
     run_main,
@@ -92,6 +91,7 @@ class PidNode(Node):
         self.clock_resets = 0
         self.stamp_guard = StampGuard()  # a state stamped far from the last awaits confirmation
         self.join: tuple[int, np.ndarray] | None = None  # (first state ns, posture): joined a running sim
+        self.joined_at_s: float | None = None  # sim s it joined a running sim at (the stats)
         self.latest_state_ns = 0
         self.last_state_ns: int | None = None
         self.answered_ns: int | None = None
@@ -300,6 +300,7 @@ class PidNode(Node):
             q_ref, v_ref = self._bridge(t_ns)
         if self.last_state_ns is None and t_ns > 0:  # joined a running sim (restarted): blend in
             self.join = (t_ns, q.copy())
+            self.joined_at_s = round(t_ns / 1e9, 6)
             self.get_logger().info(f"joined a running sim at {t_ns / 1e9:.3f} s: blending from the measured "
                                    f"posture to the targets over {self.bridge.resume_blend_s:g} s")
         if self.join is not None:
@@ -348,8 +349,8 @@ class PidNode(Node):
         return q_ref, v_ref
 
     def on_exit(self) -> None:
-        exit_log(self, "stats " + json.dumps({**self.activity.summary(), "gaps": self.gap,
-                                              "clock_resets": self.clock_resets, "gc": gc_summary(self)}))
+        exit_stats(self, {**self.activity.summary(), "gaps": self.gap, "clock_resets": self.clock_resets,
+                          "joined_at_s": self.joined_at_s, "gc": gc_summary(self)})
 
 
 

@@ -29,6 +29,7 @@ from cpg_walker.nodes.recording import CLOCK_TOPIC, BagRecorder
 from cpg_walker.nodes.runtime import (
     HotPath,
     exit_log,
+    exit_stats,
     gc_summary,
     parse_cli,
     scheduling_request,
@@ -127,9 +128,9 @@ class RecorderNode(Node):
         t0 = time.monotonic()
         path = self.bag.close()
         exit_log(self, f"wrote {path}: " + json.dumps(self.bag.counts(), sort_keys=True))
-        exit_log(self, "stats " + json.dumps({"close_s": round(time.monotonic() - t0, 3),
-                                              "longest_gap_ms": round(self.longest_gap_s * 1e3, 3),
-                                              "gc": gc_summary(self)}))
+        exit_stats(self, {"close_s": round(time.monotonic() - t0, 3), "bag": str(path),
+                          "counts": self.bag.counts(), "longest_gap_ms": round(self.longest_gap_s * 1e3, 3),
+                          "gc": gc_summary(self)})
 
 
 def _normal_scheduling() -> None:

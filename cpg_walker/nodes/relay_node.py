@@ -7,8 +7,9 @@ dropping a fraction ``loss`` (seeded) and delaying each by ``delay`` + U(0, ``ji
 kept (nodes/lossy_link.py). The consumers subscribe to the relay's outputs through remaps (``CONSUMERS``,
 ``consumer_remaps``: pid_node's /joint_targets and /joint_states, cpg_node's /imu); the publishers are
 untouched. ``loss``, ``delay`` and ``jitter`` are settable at run time; invalid values are refused with the
-reason. The exit log line ``stats {...}`` holds, per topic, the counters and the measured delay; while
-messages flow, /diagnostics says the same every ``diagnostics_period`` wall seconds.
+reason. The run statistics at exit (the ``stats_file`` parameter's JSON) hold, per topic, the counters
+and the measured delay; while messages flow, /diagnostics says the same every ``diagnostics_period``
+wall seconds.
 
 The delay is wall-clock time: meaningful in realtime pacing; in lockstep pacing it only slows the loop
 down (the sim waits for every answer), and a dropped message is ridden out by the sim's re-send
@@ -17,7 +18,6 @@ down (the sim waits for every answer), and a dropped message is ridden out by th
 
 from __future__ import annotations
 
-import json
 import time
 from functools import partial
 
@@ -42,7 +42,7 @@ from cpg_walker.nodes.messages import message_class
 from cpg_walker.nodes.params import declare_params
 from cpg_walker.nodes.runtime import (
     HotPath,
-    exit_log,
+    exit_stats,
     gc_summary,
     parse_cli,
     run_main,
@@ -182,7 +182,7 @@ class RelayNode(Node):
         self.pub_diag.publish(msg)
 
     def on_exit(self) -> None:
-        exit_log(self, "stats " + json.dumps({"topics": self.summary(), "gc": gc_summary(self)}))
+        exit_stats(self, {"topics": self.summary(), "gc": gc_summary(self)})
 
 
 def spin_relay(node: RelayNode) -> None:

@@ -62,6 +62,47 @@ def exit_log(node, text: str) -> None:
         print(f"[INFO] [{node.get_name()}]: {text}", file=sys.stderr, flush=True)
 
 
+def exit_stats(node, stats: dict, text: str | None = None) -> None:
+    """The node's run statistics at exit: written as JSON to the path of its ``stats_file`` parameter
+    (params.STATS; '' = none), which is what the graph tooling reads (graph/processes.py ``Graph.stats``),
+    and logged for people as ``text`` (default ``stats {...}``; nothing parses that line)."""
+    import json
+
+    path = node.get_parameter("stats_file").value if node.has_parameter("stats_file") else ""
+    if path:
+        try:
+            write_json_atomic(path, stats)
+        except OSError as exc:
+            exit_log(node, f"could not write the run statistics to {path}: {exc}")
+    exit_log(node, text if text is not None else "stats " + json.dumps(stats))
+
+
+def write_json_atomic(path, data: dict) -> None:
+    """``data`` as JSON at ``path``, atomically: a temporary file in the same directory renamed over it
+    (a reader sees the whole file or none)."""
+    import json
+    import os
+    import tempfile
+
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".stats-", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(data, fh, indent=1)
+            fh.write("\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
 class GcPauses:
     """Python's cyclic garbage collector as seen from a control loop: collections per generation and how
     long they held the interpreter (a collection stops every thread's Python code). ``install`` hooks

@@ -47,7 +47,7 @@ from cpg_walker.nodes.params import declare_params
 from cpg_walker.nodes.runtime import (
     HotPath,
     Throttle,
-    exit_log,
+    exit_stats,
     gc_summary,
     parse_cli,
     run_main,
@@ -353,7 +353,8 @@ class SimNode(Node):
                                f"{self.sim.max_tilt_deg} deg"),
             ("late_commands", self.late), ("late_recent", self.late_recent),
             ("late_waited", self.late_waited), ("late_held", self.late_held), ("resends", self.resends),
-            ("torques_rejected", self.torques_rejected))]
+            ("torques_rejected", self.torques_rejected), ("servo_hold", self.servo.active),
+            ("servo_holds", self.servo.entries))]
         msg = DiagnosticArray(status=[st])
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
         self.pub_diag.publish(msg)
@@ -534,7 +535,7 @@ class SimNode(Node):
             "gc": gc_summary(self),
         }
         self.record.stats = stats
-        exit_log(self, f"done: {stats['sim_s']:.3f} sim s in {stats['wall_s']:.3f} wall s, "
+        exit_stats(self, stats, f"done: {stats['sim_s']:.3f} sim s in {stats['wall_s']:.3f} wall s, "
                                f"real-time factor {stats['real_time_factor']:.3f}, late commands "
                                f"{self.late} (ran on the previous {self.late_recent}, waited "
                                f"{self.late_waited}, held {self.late_held}); {self._outcome()}")

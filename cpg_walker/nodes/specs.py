@@ -5,7 +5,17 @@ name, type, range, read-only flag and description. The nodes declare from these;
 from __future__ import annotations
 
 from cpg_walker.nodes.lossy_link import MAX_DELAY_S, MAX_JITTER_S
-from cpg_walker.nodes.params import SCHEDULING, ParamSpec, boolean, double, doubles, integer, string, strings
+from cpg_walker.nodes.params import (
+    SCHEDULING,
+    STATS,
+    ParamSpec,
+    boolean,
+    double,
+    doubles,
+    integer,
+    string,
+    strings,
+)
 from cpg_walker.robot.joints import GROUPS, MAX_TORQUE_NM
 from cpg_walker.robot.pid import GAINS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
@@ -41,6 +51,7 @@ SIM = (
     string("record_path", "write a JSON run record here on exit ('' = none)", read_only=True),
     double("record_period", "sim s between recorded samples", 1e-3, 1.0, read_only=True),
     *SCHEDULING,
+    *STATS,
 )
 
 #: Upper ends of the gains' ranges (N*m/rad, N*m/(rad*s), N*m*s/rad): far above any stable HOAP-2 gain.
@@ -70,6 +81,7 @@ PID = (
     double("safe_blend", "sim s of the C1 blend from the horizon's end to the standing crouch", 0.0, 10.0),
     double("resume_blend", "sim s of the C1 blend back to the live targets (or to a newer horizon)",
            0.0, 10.0),
+    *STATS,
 )
 
 TARGET_PLAYER = (
@@ -78,6 +90,7 @@ TARGET_PLAYER = (
     double("start_time", "sim s at which the recording starts", 0.0, 1e6, read_only=True),
     boolean("lookahead", "also send the next period's target on each tick (period from the last two ticks)",
             read_only=True),
+    *STATS,
 )
 
 RECORDER = (
@@ -89,6 +102,7 @@ RECORDER = (
             read_only=True),
     double("duration", "s of bag time to record, then stop (0 = until stopped)", 0.0, 1e9, read_only=True),
     *SCHEDULING,
+    *STATS,
 )
 
 FOXGLOVE = (
@@ -102,6 +116,7 @@ FOXGLOVE = (
     strings("parameters", "parameters of other nodes shown in Foxglove's parameter panel, NODE.NAME (e.g. "
             "cpg.zeta)", read_only=True),
     *SCHEDULING,
+    *STATS,
 )
 
 RELAY = (
@@ -116,6 +131,7 @@ RELAY = (
     double("diagnostics_period", "wall s between /diagnostics messages (while messages flow)", 0.05, 100.0,
            read_only=True),
     *SCHEDULING,
+    *STATS,
 )
 
 #: cpg_node's /cmd_vel limits (walker/cmd_vel.py CmdVelLimits; values: config/cpg.yaml).
@@ -167,6 +183,7 @@ CPG = (
     *CPG_CMD_VEL_LIMITS,
     string("cmd_vel.speed_map", "measured speed vs zeta/alpha for linear.x (a path, or a name in the "
            "package's config/)"),
+    *STATS,
 )
 #: FeedbackConfig field types that are ROS parameters, as ParamSpec types.
 FEEDBACK_FIELD_TYPES = {float: "double", str: "string", bool: "bool"}

@@ -7,8 +7,6 @@ values: config/target_player.yaml (``--params-file``).
 
 from __future__ import annotations
 
-import json
-
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -19,7 +17,7 @@ from cpg_walker.nodes.messages import JointStateBuilder
 from cpg_walker.nodes.params import declare_params
 from cpg_walker.nodes.runtime import (
     HotPath,
-    exit_log,
+    exit_stats,
     parse_cli,
     run_main,
 )
@@ -78,7 +76,7 @@ class TargetPlayerNode(Node):
         self.sent_ns = t_ns
 
     def on_exit(self) -> None:
-        exit_log(self, "stats " + json.dumps(self.activity.summary()))
+        exit_stats(self, self.activity.summary())
 
 
 

@@ -176,6 +176,7 @@ class CPGDriver:
         self.horizon_work: deque[float] = deque(maxlen=10_000)  # wall s per horizon (flat memory)
         self.clock_guard = StampGuard()
         self.clock_resets = self.reentries = 0
+        self.reentry_cause = "none"  # why the gait last re-entered from the crouch (status)
         # kept across a sim reset: the control period and the horizon's points, the last states reported
         self.control_period_ns: int | None = None  # the smallest step seen between ticks
         self.traj_offsets_ns: np.ndarray | None = None
@@ -459,6 +460,7 @@ class CPGDriver:
         self.recent.clear()
         self.rejoined_at_s = t_ns / 1e9
         self.reentries += 1
+        self.reentry_cause = why
         self.out.log("info", f"{why} at {t_ns / 1e9:.3f} s: re-entering the gait from the standing crouch "
                      f"(CPG from phase 0, alpha ramping up from 0 to {self.alpha:g}, cross-fade over "
                      f"{self.source.blend:g} s; walking from {self.walk_from_s:.3f} s)")
@@ -584,7 +586,10 @@ class CPGDriver:
              "feedback_weight": f"{self.fade.weight:.6g}",
              "sensor_age_s": "none" if self.sensor_age_s is None else f"{self.sensor_age_s:.3f}",
              "feedback_pathways": ",".join(fb.pathways), "phase_resets": str(len(fb.resets)),
-             **{k: str(n) for k, n in c.items()}}
+             **{k: str(n) for k, n in c.items()},
+             "reentries": str(self.reentries), "reentry_cause": self.reentry_cause,
+             "rejoined_at_s": "none" if self.rejoined_at_s is None else f"{self.rejoined_at_s:.3f}",
+             "clock_resets": str(self.clock_resets), "servos_held": str(self.servos_held).lower()}
         cmd = self.cmd
         state = ("off" if not self.follow_cmd_vel else "waiting" if cmd.last is None
                  else "parameters" if self.cmd_override else cmd.state)
