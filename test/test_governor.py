@@ -1,7 +1,8 @@
 """The governor (walker/governor.py) alone: driven by a stand-in of the CPG's command filters (first-order
-lags), it passes a request inside the envelope through, caps α to the envelope, brings α down before ζ
-slows, reverses through a stop (α 0, then ζ, then α ramping), lets α fall at most fall_rate per s, stands
-below the envelope's slowest ζ; the packaged config loads and a broken one names the problem."""
+lags), it reaches a request inside the envelope at its rates (ζ first, then α), caps α to the envelope,
+brings α down before ζ slows, reverses through a stop (α 0, then ζ, then α ramping), lets α fall at most
+fall_rate per s, stands below the envelope's slowest ζ; the packaged config loads and a broken one names
+the problem."""
 
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ from cpg_walker.walker.governor import Envelope, Governor, GovernorConfig
 
 DT = 0.002
 ENV = Envelope(forward=((0.3, 0.5), (0.7, 1.0), (1.5, 1.2)), backward=((0.3, 0.5), (1.5, 1.0)))
-CFG = GovernorConfig(ENV, fall_rate=0.5, ramp_rate=0.25, reverse_alpha=0.05, reverse_zeta_tolerance=0.1)
+CFG = GovernorConfig(ENV, fall_rate=0.5, ramp_rate=0.25, rise_rate=0.5, zeta_rate=0.5, reverse_alpha=0.05,
+                     reverse_zeta_tolerance=0.1)
 
 
 class Lagged:
@@ -40,17 +42,22 @@ def _run(gov: Governor, cpg: Lagged, seconds: float) -> list[tuple[float, float,
     return out
 
 
-def test_a_request_inside_the_envelope_passes_through():
+def test_a_request_inside_the_envelope_is_reached_at_the_rates():
     gov, cpg = Governor(CFG, 1.0, 1.0), Lagged(1.0, 1.0)
     gov.request(1.3, 1.1)
-    z, a, *_, state = _run(gov, cpg, 0.01)[0]
-    assert (z, a, state, gov.reason) == (1.3, 1.1, "following", "")
+    trace = _run(gov, cpg, 3.0)
+    zetas = [z for z, *_ in trace]
+    assert all(abs(z1 - z0) <= CFG.zeta_rate * DT + 1e-12 for z0, z1 in pairwise(zetas))
+    first_alpha_rise = next(i for i, (_, a, *_rest) in enumerate(trace) if a > 1.0)
+    assert abs(trace[first_alpha_rise][2] - 1.3) <= 0.1 * 1.3  # zeta first, then alpha (accelerating)
+    assert trace[0][4] == "accelerating"
+    assert trace[-1][:2] == (1.3, pytest.approx(1.1)) and gov.state == "following" and gov.reason == ""
 
 
 def test_alpha_is_capped_to_the_envelope_with_the_reason():
     gov, cpg = Governor(CFG, 1.0, 1.0), Lagged(1.0, 1.0)
     gov.request(1.5, 2.0)
-    trace = _run(gov, cpg, 1.0)
+    trace = _run(gov, cpg, 4.0)
     assert trace[-1][1] == pytest.approx(1.2) and gov.state == "limited" and "1.2" in gov.reason
 
 

@@ -145,8 +145,12 @@ def test_launch_file_compiles_and_names_the_nodes():
     path = REPO / "launch" / "sim_pid.launch.py"
     src = path.read_text()
     compile(src, str(path), "exec")
-    names = {n.value for n in ast.walk(ast.parse(src)) if isinstance(n, ast.Constant)}
-    assert {"sim_node", "pid_node", "target_player_node", "cpg_walker", "use_sim_time"} <= names
+    tree = ast.parse(src)
+    names = {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)}
+    assert {"cpg_walker", "use_sim_time"} <= names
+    executables = {n.value.id for n in ast.walk(tree) if isinstance(n, ast.keyword) and n.arg == "executable"
+                   and isinstance(n.value, ast.Name)}  # the executables, named by nodes/interface.py
+    assert {getattr(ifc, name) for name in executables} == {ifc.SIM_NODE, ifc.PID_NODE, ifc.PLAYER_NODE}
     assert "generate_launch_description" in src
 
 

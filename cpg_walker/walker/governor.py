@@ -9,7 +9,9 @@ What it does, each rule from a measured fall (config/governor.yaml says which):
   interpolated from a measured table, forward and backward apart (slow walking needs short steps; |ζ|
   below the table's first point stands: α 0).
 * **Slowing down**: when the requested ζ allows less α than is applied, α comes down first (ζ held) and
-  ζ follows once the applied α fits the new ζ's envelope.
+  ζ follows once the applied α fits the new ζ's envelope. **Speeding up** the other way round: α rises
+  only once the applied ζ is within ``reverse_zeta_tolerance`` of the new one (both rising together fell:
+  −0.48, α 0.59 → −1.0, α 1.0 at any rate tried, while each alone walked).
 * **Reversal through a stop**: a request of the other direction brings α to 0 (ζ held), flips ζ once the
   applied α is below ``reverse_alpha``, waits until the applied ζ is within ``reverse_zeta_tolerance`` of
   the new one, then raises α at ``ramp_rate`` per s.
@@ -17,7 +19,8 @@ What it does, each rule from a measured fall (config/governor.yaml says which):
   rises at most ``ramp_rate`` per s. Otherwise a request inside the envelope of the current direction is
   passed through as it is (the CPG's filters alone smooth it).
 
-``state`` says what it is doing (following | limited | slowing | reversing | ramping | standing) and
+``state`` says what it is doing (following | limited | slowing | accelerating | reversing | ramping |
+standing) and
 ``reason`` why the commanded values differ from the requested ones ('' when they do not).
 """
 
@@ -92,7 +95,8 @@ class GovernorConfig:
                 raise InputError(f"{p}: envelope.{key} must be a list of [|zeta|, alpha_max] pairs")
             return tuple((float(z), float(a)) for z, a in rows)
 
-        known = {"fall_rate", "ramp_rate", "rise_rate", "zeta_rate", "reverse_alpha", "reverse_zeta_tolerance"}
+        known = {"fall_rate", "ramp_rate", "rise_rate", "zeta_rate", "reverse_alpha",
+                 "reverse_zeta_tolerance"}
         unknown = sorted(set(d) - known)
         if unknown:
             raise InputError(f"{p}: unknown key(s) {unknown}")
@@ -140,7 +144,10 @@ class Governor:
         if applied_alpha > a_max + ALPHA_SLACK and abs(z_target) < abs(self.zeta):
             why = f"alpha {applied_alpha:.2f} down to {a_max:g} before zeta {z_target:g}"
             return self._set("slowing", why, self.zeta, a_target, dt)
-        self.zeta = z_target
+        far = abs(applied_zeta - z_target) > cfg.reverse_zeta_tolerance * abs(z_target)
+        if a_target > self.alpha and far:
+            why = f"zeta {z_target:g} first, then alpha {a_target:.3g}"  # α and ζ rising together fell
+            return self._set("accelerating", why, z_target, self.alpha, dt)
         limit = ""
         if a_target < ar:
             why = "stands" if a_max == 0.0 else f"alpha limited to {a_max:.3g}"
