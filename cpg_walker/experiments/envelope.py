@@ -226,8 +226,9 @@ def markdown(report: dict) -> str:
              f"Which (ζ, α) walk with the feedback variant `{cfg['variant']}`, "
              f"{cfg['duration_after_s']:g} sim s walked after the command. Starts: "
              + "; ".join(f"{s}: ζ, α take effect at {report['t_applied_s'][s]:g} s" for s in g["starts"])
-             + " (standing: requested at t = 0, applied when the start-up cross-fade ends; at_Ts: the walk "
-             "at ζ = α = 1 until T s).", "",
+             + " (standing: requested at t = 0, applied when the start-up cross-fade ends, so walked "
+             f"{cfg['duration_after_s'] - report['t_applied_s'].get('standing', 0.0):g} s after that; at_Ts: "
+             "the walk at ζ = α = 1 until T s).", "",
              "## Summary: the α that walk, per ζ", "",
              "Edge falls: the nearest α outside the walking range that fell, and how long after the command "
              "took effect.", "",
