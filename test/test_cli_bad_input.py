@@ -156,9 +156,9 @@ def test_a_bad_number_is_one_line_naming_the_option(capsys, place, data):
 
 # Every command writing into a directory, with the other required options (valid) before --out.
 OUT_COMMANDS = {
-    "bench": [], "cmd-vel-map": [], "cpg-walk": [], "demo": [], "drive-check": [], "faults": [],
-    "feedback-search": [], "fit": ["--csv", "{csv}"], "learn": [], "margins": [], "plot": ["{bag}"],
-    "record": [], "replay": [], "section2": [], "soak": [], "sweep": [], "transport": [],
+    "bench": [], "cmd-vel-map": [], "cpg-walk": [], "demo": [], "drive-check": [], "envelope": [],
+    "faults": [], "feedback-search": [], "fit": ["--csv", "{csv}"], "learn": [], "margins": [],
+    "plot": ["{bag}"], "record": [], "replay": [], "section2": [], "soak": [], "sweep": [], "transport": [],
     "results": [], "two-hosts": [], "walk": [], "random-walks": [],
 }
 OUT_OPTIONS = [(cmd, "--out") for cmd in OUT_COMMANDS] + [("graph", "--log-dir"), ("graph", "--record")]
@@ -197,6 +197,7 @@ FILE_OPTIONS = [
     (["replay", "--out", "{out}", "--duration", "0.05", "--no-render"], "--data"),
     (["cpg-walk", "--out", "{out}", "--duration", "0.05", "--no-render"], "--cpg"),
     (["sweep", "--out", "{out}"], "--config"),
+    (["envelope", "--out", "{out}"], "--config"),
     (["feedback-search", "--out", "{out}"], "--config"),
     (["drive-check", "--out", "{out}"], "--speed-map"),
     (["urdf", "--out", "{tmp}/x.urdf"], "--model"),

@@ -5,8 +5,8 @@
   soak, faults, drive-check, two-hosts); the fall — sim time and where — is the last line printed;
 - ``BAD_INPUT`` (2): bad input, one line naming it (raised as ``UserError``, printed by cli/main.py).
 
-Experiments whose falls are data (sweep, feedback-search, transport, margins, cmd-vel-map) exit ``OK`` and
-count the falls in their summary.
+Experiments whose falls are data (sweep, envelope, feedback-search, transport, margins, cmd-vel-map) exit
+``OK`` and count the falls in their summary.
 """
 
 from __future__ import annotations

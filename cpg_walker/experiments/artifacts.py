@@ -36,6 +36,8 @@ ARTIFACTS: tuple[Artifact, ...] = (
              ("soak.json", "soak.md"), 25.0),
     Artifact("two_hosts", "the walk across a veth pair between two network namespaces (root)", ("two-hosts",),
              ("two_hosts.json",), 2.0),
+    Artifact("envelope", "which (zeta, alpha) walk, from standing and changed at 10 s, in-process",
+             ("envelope",), ("envelope.json", "envelope.md", "envelope.png"), 20.0),
     Artifact("bench", "the benchmarks (every figure beside its same-run baseline)", ("bench",),
              ("bench.json", "bench.md", "bench_table.md", "bench_oscillators.png", "bench_robots.png"), 52.0),
 )
