@@ -15,9 +15,9 @@ What it does, each rule from a measured fall (config/governor.yaml says which):
 * **Reversal through a stop**: a request of the other direction brings α to 0 (ζ held), flips ζ once the
   applied α is below ``reverse_alpha``, waits until the applied ζ is within ``reverse_zeta_tolerance`` of
   the new one, then raises α at ``ramp_rate`` per s.
-* **α falls** at most ``fall_rate`` per s (a stop within a stride fell at some phases); after a stop it
-  rises at most ``ramp_rate`` per s. Otherwise a request inside the envelope of the current direction is
-  passed through as it is (the CPG's filters alone smooth it).
+* **Rates**: α falls at most ``fall_rate`` per s (a stop within a stride fell at some phases) and rises at
+  most ``rise_rate`` per s, from standing (after a stop, a reversal, or α 0) at most ``ramp_rate``; ζ moves
+  at most ``zeta_rate`` per s within a direction. The CPG's own filters smooth what comes out.
 
 ``state`` says what it is doing (following | limited | slowing | accelerating | reversing | ramping |
 standing) and
@@ -144,6 +144,8 @@ class Governor:
         if applied_alpha > a_max + ALPHA_SLACK and abs(z_target) < abs(self.zeta):
             why = f"alpha {applied_alpha:.2f} down to {a_max:g} before zeta {z_target:g}"
             return self._set("slowing", why, self.zeta, a_target, dt)
+        if self.alpha <= cfg.reverse_alpha < a_target:
+            self._ramping = True  # stepping again from standing: the gentle ramp, as after a reversal
         far = abs(applied_zeta - z_target) > cfg.reverse_zeta_tolerance * abs(z_target)
         if a_target > self.alpha and far:
             why = f"zeta {z_target:g} first, then alpha {a_target:.3g}"  # α and ζ rising together fell
