@@ -259,7 +259,7 @@ class CPGNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     argv = parse_cli(ifc.CPG_NODE, "The learned humanoid CPG: /joint_targets on /clock, zeta/alpha "
-                     "modulation.", ifc.help_text(ifc.CPG_NODE), argv)
+                     "modulation.", specs.node_help(ifc.CPG_NODE), argv)
     return run_main(argv, CPGNode)
 
 

@@ -72,21 +72,6 @@ from cpg_walker.nodes.runtime import (
 )
 from cpg_walker.robot.urdf import read_urdf
 
-INTERFACE = """\
-subscribes: /joint_states, /joint_targets (sensor_msgs/JointState), /odom/ground_truth (nav_msgs/Odometry),
-  /foot_load/left and /foot_load/right (geometry_msgs/WrenchStamped) - best effort, raw; /cpg/state
-  (std_msgs/Float64MultiArray), /diagnostics (diagnostic_msgs/DiagnosticArray), /parameter_events
-serves (Foxglove WebSocket, ws://host:port): channels /tf (foxglove.FrameTransforms: odom -> base_link
-  and every link, posed from /joint_states + /odom/ground_truth), /joint_states and /joint_targets
-  (foxglove.JointStates), /cpg/state (JSON: per DOF name the oscillators' phase_rad, frequency_hz,
-  amplitude_rad and the target), /contact (JSON: sole loads, feet down, touchdown counts), /contact/touchdown
-  (JSON: one message per step), /diagnostics (JSON by status name), /robot_description (JSON
-  {"data": URDF}); the Parameters capability: the forwarded parameters as /<node>.<name> (get and set
-  through the node's parameter services) and /robot_description (read-only); the Time capability (sim time)
-calls: /<node>/get_parameters, /<node>/set_parameters of the forwarded parameters' nodes
-parameters: host, port (0 = any free port, logged), display_rate (Hz, wall clock), service_timeout (wall s),
-  parameters (forwarded, NODE.NAME), realtime_priority, nice, cpu_affinity (OS scheduling)"""
-
 #: The shown topics: only the newest message is kept (by the middleware) until the next display.
 NEWEST = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 #: The sole loads: every sample (touchdowns), taken at least every LOADS_PERIOD_S (depth: 128 ms at
@@ -313,8 +298,8 @@ def spin_bridge(node: FoxgloveNode) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = parse_cli("foxglove_node", "A live view of the graph in Foxglove (WebSocket server).", INTERFACE,
-                     argv)
+    argv = parse_cli("foxglove_node", "A live view of the graph in Foxglove (WebSocket server).",
+                     specs.node_help(ifc.FOXGLOVE_NODE), argv)
     return run_main(argv, FoxgloveNode, spin_bridge)
 
 

@@ -38,16 +38,6 @@ from cpg_walker.robot.pid import GAINS, LIMITS, PidLaw, gain_owner
 from cpg_walker.robot.trajectory import HORIZON, LIVE, SAFE, GapBridge
 from cpg_walker.timing import ActivityStats, StampGuard
 
-INTERFACE = """\
-subscribes: /joint_targets (sensor_msgs/JointState: position, optional velocity, any subset of joints by
-  name), /joint_states (sensor_msgs/JointState), /joint_trajectory (trajectory_msgs/JointTrajectory: the
-  source's horizon of future targets, followed when the targets are late; not in lockstep)
-publishes: /joint_torques (sensor_msgs/JointState: name + effort N*m, stamp = the answered state's)
-parameters: kp.<group>, ki.<group>, kd.<group> for group in leg, arm, body, head (and kp.<joint> ... for
-  per-joint overrides given at start-up), max_torque, integral_limit, max_velocity (settable, validated);
-  target_timeout, safe_blend, resume_blend (sim s), lockstep, wait_for_targets, target_wait and
-  startup_wait (wall s); realtime_priority, nice, cpu_affinity (OS scheduling)"""
-
 #: Targets kept by stamp until the state of their stamp applies them (lockstep: waits for them; otherwise
 #: every one stamped up to the state's stamp is applied); past the limit the oldest half is dropped (a
 #: sim that far behind its controller has restarted).
@@ -356,7 +346,7 @@ class PidNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     argv = parse_cli("pid_node", "HOAP-2 joint PID servos: /joint_targets + /joint_states -> /joint_torques.",
-                     INTERFACE, argv)
+                     specs.node_help(ifc.PID_NODE), argv)
     return run_main(argv, PidNode)
 
 

@@ -37,14 +37,6 @@ from cpg_walker.nodes.runtime import (
     spin_once_guarded,
 )
 
-INTERFACE = """\
-subscribes: every topic with a publisher, found by scanning the graph (raw CDR, the publishers' QoS)
-writes: out_dir/recording.mcap (rosbag2 MCAP, ROS 2 CDR) and out_dir/metadata.yaml, on stop: every
-  recorded topic, plus /tf (odom -> base_link and every moving link, one message per
-  /odom/ground_truth sample) and /tf_static (welded links, imu) computed from the simulation's poses
-parameters: out_dir ('' = ./recording_<UTC date-time>), scan_period (wall s between topic scans),
-  queue_depth (messages held per subscription), duration (s of bag time, then stop; 0 = until stopped)"""
-
 #: The node's name (sim_node's ``wait_for_subscriber`` names it when a graph is recorded).
 NAME = NODE_NAMES[RECORDER_NODE]
 
@@ -185,7 +177,8 @@ def main(argv: list[str] | None = None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    argv = parse_cli("recorder_node", "Records every topic of the graph to a rosbag2 MCAP.", INTERFACE, argv)
+    argv = parse_cli("recorder_node", "Records every topic of the graph to a rosbag2 MCAP.",
+                     specs.node_help(RECORDER_NODE), argv)
     stopping = [False]
 
     def stop(_signum: int, _frame: object) -> None:

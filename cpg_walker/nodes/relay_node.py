@@ -50,14 +50,6 @@ from cpg_walker.nodes.runtime import (
     spin_once_guarded,
 )
 
-INTERFACE = """\
-subscribes: each of `topics` (raw CDR, type from `types`)
-publishes: prefix + topic for each (the same messages, some dropped, delayed); /diagnostics (relay
-  counters, while messages flow)
-parameters: topics, types, prefix (e.g. /net), loss (fraction 0-1), delay (wall s), jitter (wall s:
-  each message waits delay + U(0, jitter), order kept), seed (the drops' RNG), queue_depth,
-  diagnostics_period (wall s); loss, delay and jitter settable at run time"""
-
 #: The node's name (config/relay.yaml).
 NAME = NODE_NAMES[RELAY_NODE]
 #: Subscriptions of the consumers that a relay may sit in front of, by node executable (only subscribers
@@ -207,8 +199,8 @@ def spin_relay(node: RelayNode) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = parse_cli("relay_node", "Relays topics with loss, delay and jitter (fault injection).", INTERFACE,
-                     argv)
+    argv = parse_cli("relay_node", "Relays topics with loss, delay and jitter (fault injection).",
+                     specs.node_help(RELAY_NODE), argv)
     return run_main(argv, RelayNode, loop=spin_relay)
 
 

@@ -70,21 +70,6 @@ try:  # tf2_msgs is not on PyPI: a pip-only install has no live /tf (recordings 
 except ImportError:
     TFMessage = None
 
-INTERFACE = """\
-publishes: /clock (rosgraph_msgs/Clock), /joint_states (sensor_msgs/JointState: position, velocity,
-  effort of all 25 joints), /imu (sensor_msgs/Imu, frame 'imu'), /foot_load/left and /foot_load/right
-  (geometry_msgs/WrenchStamped, sole frames), /odom/ground_truth (nav_msgs/Odometry, evaluation only),
-  /sim/fallen (std_msgs/Bool, latched), /sim/servo_hold (std_msgs/Bool, latched: the servos hold by
-  themselves, no controller), /diagnostics (diagnostic_msgs/DiagnosticArray),
-  /robot_description (std_msgs/String: the URDF, latched; with publish_description), /tf (tf2_msgs/TFMessage:
-  odom -> base_link each period; only where tf2_msgs is installed, i.e. a ROS install)
-subscribes: /joint_torques (sensor_msgs/JointState: name + effort in N*m, stamp = the state it answers)
-services: ~/reset, ~/push (std_srvs/Trigger)
-parameters: pacing (realtime|fast|lockstep), control_period (s), real_time_factor, duration (sim s,
-  0 = run until stopped), publish_description, stop_on_fall, wait_for_controller, wait_for_subscriber,
-  lockstep_resend and late_torque_wait (wall s), max_torque_age and servo_hold_after (sim s), odom_period,
-  diagnostics_period (sim s), imu_variance_floor, push.force [N,N,N], push.body, push.duration (s),
-  record_path, record_period (s), realtime_priority, nice, cpu_affinity (OS scheduling, realtime pacing)"""
 
 #: Wall s between services of the executor (parameters, services) while the loop runs.
 SLOW_SPIN_PERIOD_S = 0.02
@@ -545,7 +530,8 @@ class SimNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = parse_cli("sim_node", "MuJoCo HOAP-2 simulation node (publishes /clock).", INTERFACE, argv)
+    argv = parse_cli("sim_node", "MuJoCo HOAP-2 simulation node (publishes /clock).",
+                     specs.node_help(ifc.SIM_NODE), argv)
     return run_main(argv, SimNode, loop=SimNode.run)
 
 

@@ -208,3 +208,16 @@ CPG_FEEDBACK = (strings("feedback_pathways", f"feedback pathways in use, any of 
 SPECS = {"sim_node": SIM, "pid_node": PID, "target_player_node": TARGET_PLAYER,
          "cpg_node": CPG + CPG_FEEDBACK, "recorder_node": RECORDER, "foxglove_node": FOXGLOVE,
          "relay_node": RELAY}
+
+
+def node_help(executable: str) -> str:
+    """A node's ``--help`` epilog: its topics (interface.help_text) and every parameter with its range."""
+    from cpg_walker.nodes.interface import help_text
+    from cpg_walker.nodes.params import range_text
+
+    lines = [help_text(executable), "parameters (type range: description; * = settable at run time):"]
+    for spec in SPECS[executable]:
+        rng = range_text(spec)
+        settable = "" if spec.read_only else " *"
+        lines.append(f"  {spec.name} ({spec.type}{' ' + rng if rng else ''}){settable}: {spec.description}")
+    return "\n".join(lines)

@@ -25,13 +25,6 @@ from cpg_walker.nodes.validation import to_ns
 from cpg_walker.robot.gait_data import Cycle, GaitPlayback, find_steady_cycle, load_gait
 from cpg_walker.timing import ActivityStats
 
-INTERFACE = """\
-subscribes: /clock (rosgraph_msgs/Clock)
-publishes: /joint_targets (sensor_msgs/JointState: position + velocity of all 25 joints, stamped with
-  the tick, and with lookahead also the next tick)
-parameters: gait (walk|slow), data (CSV path, overrides gait), start_time (sim s), lookahead (also send
-  the next period's target, period taken from the last two ticks)"""
-
 
 class TargetPlayerNode(Node):
     """Plays a recording (GaitPlayback) on /clock. ``node_options`` go to rclpy's Node."""
@@ -82,7 +75,7 @@ class TargetPlayerNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     argv = parse_cli("target_player_node", "Streams a recorded HOAP-2 gait as /joint_targets on /clock.",
-                     INTERFACE, argv)
+                     specs.node_help(ifc.PLAYER_NODE), argv)
     return run_main(argv, TargetPlayerNode)
 
 

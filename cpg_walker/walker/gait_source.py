@@ -143,6 +143,10 @@ class CPGGaitSource:
             self.ctrl.set_zeta(zeta)
             self.ctrl.set_alpha(alpha)
 
+    def _open_loop(self) -> bool:
+        """No feedback pathways closed (the governor's open-loop envelope)."""
+        return True
+
     def _governor(self) -> Governor | None:
         """The governor once the CPG has taken over (made then, from the commands as they stand)."""
         if self.governor is None and self.governor_config is not None and self._t_net >= self.takeover_s:
@@ -157,7 +161,7 @@ class CPGGaitSource:
         while self._t_net + 0.5 * self.h <= t:
             gov = self._governor()
             if gov is not None:
-                z, a = gov.update(self.h, ctrl.zeta, ctrl.alpha)
+                z, a = gov.update(self.h, ctrl.zeta, ctrl.alpha, self._open_loop())
                 if z != ctrl.zeta_command:
                     ctrl.set_zeta(z)
                 if a != ctrl.alpha_command:
@@ -298,6 +302,11 @@ class FeedbackGaitSource(CPGGaitSource):
         if self.keep_traces and t >= self._next_trace - 1e-9:  # one per trace_dt, whatever the tick rate
             self.g_trace.append((t, *fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
             self._next_trace = t + self.trace_dt
+
+    def _open_loop(self) -> bool:
+        """The pathways are not all closed at full weight (none chosen, fading, or not yet active)."""
+        fb = self.fb
+        return not fb.pathways or fb.weight < 1.0 or self._t_net < self.active_from
 
     def reenter(self, t: float, zeta: float, alpha: float) -> None:
         """`CPGGaitSource.reenter`; the feedback pathways close once its cross-fade ends."""

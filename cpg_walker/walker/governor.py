@@ -66,9 +66,11 @@ class Envelope:
 
 @dataclass(frozen=True)
 class GovernorConfig:
-    """The governor's envelope and rates (config/governor.yaml)."""
+    """The governor's envelopes and rates (config/governor.yaml): ``envelope`` with the feedback pathways
+    closed, ``open_loop`` without them (None: the same)."""
 
     envelope: Envelope
+    open_loop: Envelope | None = None
     fall_rate: float = 0.5
     ramp_rate: float = 0.25
     rise_rate: float = 0.25
@@ -87,13 +89,22 @@ class GovernorConfig:
             raise InputError(f"{p}: {exc}") from None
         if not isinstance(d, dict) or not isinstance(d.get("envelope"), dict):
             raise InputError(f"{p}: expected a mapping with 'envelope: {{forward: ..., backward: ...}}'")
-        env = d.pop("envelope")
 
-        def table(key: str) -> tuple[tuple[float, float], ...]:
-            rows = env.get(key)
-            if not isinstance(rows, list) or not all(isinstance(r, list) and len(r) == 2 for r in rows):
-                raise InputError(f"{p}: envelope.{key} must be a list of [|zeta|, alpha_max] pairs")
-            return tuple((float(z), float(a)) for z, a in rows)
+        def envelope(name: str) -> Envelope:
+            env = d.pop(name)
+            if not isinstance(env, dict):
+                raise InputError(f"{p}: {name} must be a mapping with forward: and backward:")
+
+            def table(key: str) -> tuple[tuple[float, float], ...]:
+                rows = env.get(key)
+                if not isinstance(rows, list) or not all(isinstance(r, list) and len(r) == 2 for r in rows):
+                    raise InputError(f"{p}: {name}.{key} must be a list of [|zeta|, alpha_max] pairs")
+                return tuple((float(z), float(a)) for z, a in rows)
+
+            return Envelope(table("forward"), table("backward"))
+
+        closed = envelope("envelope")
+        open_loop = envelope("open_loop") if "open_loop" in d else None
 
         known = {"fall_rate", "ramp_rate", "rise_rate", "zeta_rate", "reverse_alpha",
                  "reverse_zeta_tolerance"}
@@ -103,7 +114,7 @@ class GovernorConfig:
         rates = {k: float(v) for k, v in d.items()}
         if any(not (math.isfinite(v) and v > 0) for v in rates.values()):
             raise InputError(f"{p}: rates and tolerances must be finite and > 0, got {rates}")
-        return cls(Envelope(table("forward"), table("backward")), **rates)
+        return cls(closed, open_loop, **rates)
 
 
 class Governor:
@@ -125,9 +136,12 @@ class Governor:
         self.requested = self.zeta, self.alpha = float(zeta), float(alpha)
         self.state, self.reason, self._ramping = "following", "", False
 
-    def update(self, dt: float, applied_zeta: float, applied_alpha: float) -> tuple[float, float]:
-        """The (ζ, α) to command for the next ``dt`` s, given the CPG's applied (filtered) ζ and α."""
-        cfg, env = self.cfg, self.cfg.envelope
+    def update(self, dt: float, applied_zeta: float, applied_alpha: float,
+               open_loop: bool = False) -> tuple[float, float]:
+        """The (ζ, α) to command for the next ``dt`` s, given the CPG's applied (filtered) ζ and α;
+        ``open_loop``: the feedback pathways are not (fully) closed (the ``open_loop`` envelope)."""
+        cfg = self.cfg
+        env = cfg.open_loop if open_loop and cfg.open_loop is not None else cfg.envelope
         zr, ar = self.requested
         direction = 1.0 if self.zeta >= 0 else -1.0
         wants_other_way = zr != 0.0 and (zr > 0) != (direction > 0)
