@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from cpg_walker.cli.checks import count, in_text_file, out_dir, positive
+from cpg_walker.cli.checks import config_or_file, count, out_dir, positive
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="parallel walks (default: every core)")
     p.add_argument("--duration", type=positive, default=None, metavar="S",
                    help="sim s walked after each command (default: config/envelope.yaml's duration_after_s)")
-    p.add_argument("--config", default=None, type=in_text_file, metavar="FILE",
+    p.add_argument("--config", default=None, type=config_or_file, metavar="FILE",
                    help="an envelope YAML (default config/envelope.yaml)")
     p.set_defaults(func=_run)
 

@@ -38,6 +38,9 @@ ARTIFACTS: tuple[Artifact, ...] = (
              ("two_hosts.json",), 2.0),
     Artifact("envelope", "which (zeta, alpha) walk, from standing and changed at 10 s, in-process",
              ("envelope",), ("envelope.json", "envelope.md", "envelope.png"), 20.0),
+    Artifact("envelope_open_loop", "the same without feedback (the governor's open-loop table)",
+             ("envelope", "--config", "envelope_open_loop.yaml"),
+             ("envelope.json", "envelope.md", "envelope.png"), 3.0),
     Artifact("bench", "the benchmarks (every figure beside its same-run baseline)", ("bench",),
              ("bench.json", "bench.md", "bench_table.md", "bench_oscillators.png", "bench_robots.png"), 52.0),
 )

@@ -36,6 +36,8 @@ def load_config(path: str | Path | None = None, quick: bool = False) -> dict:
     """config/envelope.yaml (or ``path``), validated; ``quick`` merges its ``quick:`` section."""
     from cpg_walker.paths import config_path
 
+    if path and not Path(path).exists() and len(Path(path).parts) == 1:
+        path = config_path(str(path))  # a name in the package's config/
     c = Config(path or config_path("envelope.yaml"))
     template = Config(config_path("envelope.yaml")).data if path else c.data
     template = {k: v for k, v in template.items() if k != "quick"}
