@@ -35,6 +35,8 @@ import numpy as np
 from cpg_walker.errors import InputError
 from cpg_walker.paths import config_path
 
+#: After a reversal the robot steps off at |ζ| at most this (the learned rhythm), then speeds up.
+STEP_OFF_ZETA = 1.0
 #: A state's α may exceed the envelope by this much before ζ waits for it (filter residue).
 ALPHA_SLACK = 0.02
 
@@ -144,22 +146,29 @@ class Governor:
         env = cfg.open_loop if open_loop and cfg.open_loop is not None else cfg.envelope
         zr, ar = self.requested
         direction = 1.0 if self.zeta >= 0 else -1.0
-        wants_other_way = zr != 0.0 and (zr > 0) != (direction > 0)
-        if wants_other_way:
+        step_off = math.copysign(min(abs(zr), STEP_OFF_ZETA), zr)  # steps begin at most at the learned rhythm
+        if zr != 0.0 and (zr > 0) != (direction > 0):  # the other way
             if applied_alpha > cfg.reverse_alpha or self.alpha > cfg.reverse_alpha:
                 return self._set("reversing", f"reversing to zeta {zr:g} through a stop", self.zeta, 0.0, dt)
-            self.zeta, self._ramping = zr, True  # stepping has stopped: the new direction
+            self.zeta, self._ramping = step_off, True  # stepping has stopped: the new direction
+        elif not self._ramping and self.alpha <= cfg.reverse_alpha < min(ar, env.alpha_max(zr)) and zr != 0.0:
+            self.zeta, self._ramping = step_off, True  # stepping off from standing
         z_target = self.zeta if zr == 0.0 else zr  # ζ 0: stand, keeping the direction
-        if abs(applied_zeta - z_target) > cfg.reverse_zeta_tolerance * abs(z_target) and self._ramping \
-                and self.alpha <= cfg.reverse_alpha:
-            return self._set("reversing", f"reversing to zeta {zr:g}: the new zeta first", z_target, 0.0, dt)
+        if self._ramping and self.alpha <= cfg.reverse_alpha \
+                and abs(applied_zeta - self.zeta) > cfg.reverse_zeta_tolerance * abs(self.zeta):
+            return self._set("reversing", f"to zeta {zr:g}: zeta {self.zeta:g} first, then steps", self.zeta,
+                             0.0, dt)
         a_max = 0.0 if zr == 0.0 else env.alpha_max(z_target)  # ζ 0: stand
         a_target = min(ar, a_max)
+        if self._ramping:  # steps growing at ramp_rate at the step-off ζ, then on to the requested ζ
+            a_ramp = min(a_target, env.alpha_max(self.zeta))
+            if self.alpha < a_ramp:
+                return self._set("ramping", f"steps growing at {cfg.ramp_rate:g}/s at zeta {self.zeta:g}, "
+                                 f"then zeta {z_target:g}", self.zeta, a_ramp, dt)
+            self._ramping = False
         if applied_alpha > a_max + ALPHA_SLACK and abs(z_target) < abs(self.zeta):
             why = f"alpha {applied_alpha:.2f} down to {a_max:g} before zeta {z_target:g}"
             return self._set("slowing", why, self.zeta, a_target, dt)
-        if self.alpha <= cfg.reverse_alpha < a_target:
-            self._ramping = True  # stepping again from standing: the gentle ramp, as after a reversal
         far = abs(applied_zeta - z_target) > cfg.reverse_zeta_tolerance * abs(z_target)
         if a_target > self.alpha and far:
             why = f"zeta {z_target:g} first, then alpha {a_target:.3g}"  # α and ζ rising together fell
@@ -168,11 +177,6 @@ class Governor:
         if a_target < ar:
             why = "stands" if a_max == 0.0 else f"alpha limited to {a_max:.3g}"
             limit = f"zeta {z_target:g}: {why} (the measured envelope)"
-        if self._ramping and self.alpha < a_target:
-            why = f"alpha rising at {cfg.ramp_rate:g}/s after a stop" + (f"; {limit}" if limit else "")
-            return self._set("ramping", why, z_target, a_target, dt)
-        self._ramping = False
-        if limit:
             return self._set("standing" if a_max == 0.0 else "limited", limit, z_target, a_target, dt)
         return self._set("standing" if a_target == 0.0 else "following", "", z_target, a_target, dt)
 
