@@ -108,3 +108,14 @@ def test_the_packaged_config_loads_and_a_broken_one_names_the_problem(tmp_path):
     bad.write_text("envelope: {forward: [[0.3, 0.5]], backward: [[0.3, 0.5]]}\nfall_rat: 1\n")
     with pytest.raises(InputError, match="fall_rat"):
         GovernorConfig.load(bad)
+
+
+def test_a_scheduled_value_out_of_range_is_refused_recorded_and_the_walk_goes_on():
+    from cpg_walker.experiments.cpg_walk import walk
+    from cpg_walker.walker.learning import cpg_defaults, load_controller
+
+    ctrl = load_controller(cpg_defaults()["cpg_file"])[0]
+    m = walk(ctrl, 8.0, schedule=[(7.0, 3.0, 1.0), (7.5, 1.2, 0.8)])
+    assert m["refused"] == [{"t_s": 7.0, "zeta": 3.0, "alpha": 1.0, "reason": m["refused"][0]["reason"]}]
+    assert "zeta" in m["refused"][0]["reason"] and "[-2" in m["refused"][0]["reason"]
+    assert m["schedule"] == [[7.5, 1.2, 0.8]] and not m["fell"] and m["governed"]

@@ -71,7 +71,9 @@ def test_cmd_vel_follow_timeout_resume_and_bad_input(graph, probe):
     sending["twist"] = (0.1, 0.05)
     zeta, alpha = smap.inverse(0.1)
     t_f, v = until(lambda v: v["cmd_vel"] == "following", "following /cmd_vel", t_walk)
-    assert float(v["zeta_command"]) == pytest.approx(zeta, rel=1e-5) and float(v["alpha_command"]) == alpha
+    # the follower's output (cmd_vel_*), which the governor then reaches at its rates (zeta_command)
+    assert float(v["cmd_vel_zeta"]) == pytest.approx(zeta, rel=1e-5) and float(v["cmd_vel_alpha"]) == alpha
+    assert float(v["zeta_requested"]) == 1.0 and v["governor"] in ("accelerating", "following")
     assert float(v["cmd_vel_turn_rate"]) == 0.05 and v["cmd_vel_turn"] == "ok"
     assert v["cmd_vel_linear_x"] == "0.1" and v["cmd_vel_angular_z"] == "0.05"
 
@@ -90,12 +92,12 @@ def test_cmd_vel_follow_timeout_resume_and_bad_input(graph, probe):
     t_low, _ = until(lambda v: float(v["alpha"]) < 0.05, "the applied alpha near 0", t_stop)
     alphas = [float(v["alpha"]) for t, v, _ in diags() if t_stop <= t <= t_low]
     assert all(b <= a for a, b in itertools.pairwise(alphas)) and alphas[0] > 0.5, alphas  # smooth
-    assert float(v["zeta_command"]) == pytest.approx(zeta, rel=1e-5)  # the direction kept
+    assert float(v["cmd_vel_zeta"]) == pytest.approx(zeta, rel=1e-5)  # the direction kept
 
     sending["twist"] = (0.03, 0.0)  # resumes (slow: shorter steps at zeta 1)
     z2, a2 = smap.inverse(0.03)
     _, v = until(lambda v: v["cmd_vel"] == "following" and v["cmd_vel_linear_x"] == "0.03", "resumed", t_low)
-    assert float(v["alpha_command"]) == pytest.approx(a2, rel=1e-5) and float(v["zeta_command"]) == z2
+    assert float(v["cmd_vel_alpha"]) == pytest.approx(a2, rel=1e-5) and float(v["cmd_vel_zeta"]) == z2
 
     bad = probe.set_param("cpg", "cmd_vel.timeout", -1.0)
     assert not bad.successful and "cmd_vel.timeout" in bad.reason, bad.reason

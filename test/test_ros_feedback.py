@@ -84,8 +84,9 @@ def test_schedule_text_and_where_it_landed():
     from cpg_walker.experiments.walk_graph import landed, parse_schedule
 
     assert parse_schedule("12,1.2,1; 8,0.8,1.1;") == [(8.0, 0.8, 1.1), (12.0, 1.2, 1.0)]
+    assert parse_schedule("8,3.0,1") == [(8.0, 3.0, 1.0)]  # out of range: sent, refused, recorded (refused)
     for bad, why in (("8,1.2", "time,zeta,alpha"), ("8,x,1", "three numbers"), ("-1,1,1", ">= 0"),
-                     ("8,3.0,1", "zeta")):
+                     ("8,nan,1", "finite")):
         with pytest.raises(ValueError, match=why):
             parse_schedule(bad)
     sent = [{"t_s": 8.0, "zeta": 1.2, "alpha": 0.9, "sent_at_sim_s": 8.0, "accepted": True, "reason": "",
