@@ -13,8 +13,10 @@ from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 
 pytestmark = pytest.mark.slow
 
-#: Seeds walked in CI (others are walked by `cpg-walker random-walks`; the closing notes list them).
-SEEDS = (7, 31)
+#: Seeds walked in CI. Not every seed walks: docs/results/random_walks/ holds seeds 100-123 with and without
+#: feedback (`cpg-walker random-walks --seeds 100-123 [--feedback off]`): 44 of 48 without a fall; these
+#: two walked in both, so a change that makes them fall is a regression.
+SEEDS = (100, 101)
 
 
 def test_sequences_are_seeded_and_inside_the_ranges():
