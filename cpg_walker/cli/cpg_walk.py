@@ -55,6 +55,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "reset_both, heading (ours); default: config/feedback.yaml's pathways")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="override a config/feedback.yaml value for this walk (repeatable)")
+    p.add_argument("--governor", choices=("on", "off"), default="on",
+                   help="the governor (walker/governor.py) between the commands and the CPG: on (default, "
+                        "as cpg_node) | off (the raw controller: values the robot cannot walk are commanded "
+                        "as they are)")
     p.add_argument("--no-render", action="store_true", help="skip the filmstrip")
     p.set_defaults(func=_run)
 
@@ -95,7 +99,7 @@ def _run(args: argparse.Namespace) -> int:
             raise InputError(f"--set: {exc}") from None
     m = run_cpg_walk(args.out, args.duration, args.zeta, args.alpha, args.oscillators, args.cpg,
                      args.transition, args.blend, args.schedule, render=not args.no_render, pathways=pathways,
-                     feedback_overrides=overrides)
+                     feedback_overrides=overrides, governed=args.governor == "on")
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps", "lateral_drift_m",
             "heading_change_deg", "n_oscillators")
     print(json.dumps({k: m[k] for k in keys}))

@@ -30,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--alpha", type=within(*ALPHA_RANGE), default=None, metavar="A",
                    help="amplitude (step length) scale, in [{:g}, {:g}] (default: cpg_node's, "
                         "config/cpg.yaml)".format(*ALPHA_RANGE))
+    p.add_argument("--governor", choices=("on", "off"), default=None,
+                   help="cpg_node's governor (walker/governor.py): on (default, config/cpg.yaml) | off "
+                        "(the raw controller: values the robot cannot walk are commanded as they are)")
     p.add_argument("--feedback", choices=("on", "off"), default=None,
                    help="cpg_node's sensory feedback pathways (default: its 'feedback', config/cpg.yaml)")
     p.add_argument("--schedule", default=None, metavar="T,Z,A;...",
@@ -56,7 +59,9 @@ def _run(args: argparse.Namespace) -> int:
     feedback = None if args.feedback is None else args.feedback == "on"
     report = run_graph_walk(args.out, duration=args.duration, zeta=args.zeta, alpha=args.alpha,
                             cpg_file=args.cpg_file, feedback=feedback, schedule=schedule, pacing=args.pacing,
-                            record=args.record, foxglove=args.foxglove)
+                            record=args.record, foxglove=args.foxglove,
+                            node_params=None if args.governor is None else
+                            {"cpg_node": {"governor": args.governor == "on"}})
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps",
             "lateral_drift_m", "heading_change_deg", "zeta", "alpha", "feedback", "real_time_factor")
     print(json.dumps({k: report[k] for k in keys}))

@@ -115,7 +115,8 @@ def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float | None = None
                  n_oscillators: int | None = None, cpg_file: str | None = None, transition: str = "recording",
                  blend_s: float = 1.0, schedule: list[tuple[float, float, float]] | None = None,
                  render: bool = True, progress_enabled: bool = True,
-                 pathways: tuple[str, ...] | None = None, feedback_overrides: dict | None = None) -> dict:
+                 pathways: tuple[str, ...] | None = None, feedback_overrides: dict | None = None,
+                 governed: bool = True) -> dict:
     """`cpg-walker cpg-walk`: walk, write DIR/walk.json and DIR/filmstrip.png. `pathways` (None = no
     feedback) closes those feedback pathways with config/feedback.yaml. ``zeta``/``alpha`` None: cpg_node's
     (config/cpg.yaml)."""
@@ -141,7 +142,7 @@ def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float | None = None
 
         fb = FeedbackController(FeedbackConfig.load(**(feedback_overrides or {})), pathways)
     m = walk(ctrl, duration, zeta, alpha, transition, blend_s, schedule=schedule, on_log=grabber,
-             progress=progress, feedback=fb)
+             progress=progress, feedback=fb, governed=governed)
     progress.close()
     m["cpg_file"] = origin
     m["learned_gait_frequency_hz"] = ctrl.gait_frequency_hz()

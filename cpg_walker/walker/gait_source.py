@@ -135,8 +135,22 @@ class CPGGaitSource:
         self._request(zeta, alpha)
         return False
 
-    def _request(self, zeta: float, alpha: float) -> None:
-        gov = self._governor()
+    def _request(self, zeta: float, alpha: float, at: float | None = None) -> None:
+        """To the governor once the CPG has taken over (at sim time ``at``, default the network's). The
+        start-up command (due at the takeover, the network not there yet) goes to the CPG's filters at
+        once with α capped to the envelope, as the envelope's "from standing" cells were measured; the
+        governor starts from it."""
+        cfg = self.governor_config
+        if self.governor is None and cfg is not None and at is not None and self._t_net < self.takeover_s \
+                and at >= self.takeover_s - 1e-9:
+            env = cfg.envelope if self._closes_loop() else (cfg.open_loop or cfg.envelope)
+            first = min(alpha, env.alpha_max(zeta))
+            self.ctrl.set_zeta(zeta)
+            self.ctrl.set_alpha(first)
+            self.governor = Governor(cfg, zeta, first)
+            self.governor.request(zeta, alpha)
+            return
+        gov = self._governor(at)
         if gov is not None:
             gov.request(zeta, alpha)
         else:
@@ -147,16 +161,22 @@ class CPGGaitSource:
         """No feedback pathways closed (the governor's open-loop envelope)."""
         return True
 
-    def _governor(self) -> Governor | None:
-        """The governor once the CPG has taken over (made then, from the commands as they stand)."""
-        if self.governor is None and self.governor_config is not None and self._t_net >= self.takeover_s:
+    def _closes_loop(self) -> bool:
+        """Feedback pathways will close at the takeover (the envelope of the start-up command)."""
+        return False
+
+    def _governor(self, at: float | None = None) -> Governor | None:
+        """The governor once the CPG has taken over (made then, from the commands as they stand): from
+        the network's time, or ``at`` (a command due at the takeover goes through it too)."""
+        t = self._t_net if at is None else at
+        if self.governor is None and self.governor_config is not None and t >= self.takeover_s - 1e-9:
             self.governor = Governor(self.governor_config, self.ctrl.zeta_command, self.ctrl.alpha_command)
         return self.governor
 
     def _advance(self, t: float) -> None:
         while self.schedule and self.schedule[0][0] <= t + 1e-12:
-            _, z, a = self.schedule.pop(0)
-            self._request(z, a)
+            t_cmd, z, a = self.schedule.pop(0)
+            self._request(z, a, t_cmd)
         ctrl = self.ctrl
         while self._t_net + 0.5 * self.h <= t:
             gov = self._governor()
@@ -302,6 +322,9 @@ class FeedbackGaitSource(CPGGaitSource):
         if self.keep_traces and t >= self._next_trace - 1e-9:  # one per trace_dt, whatever the tick rate
             self.g_trace.append((t, *fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
             self._next_trace = t + self.trace_dt
+
+    def _closes_loop(self) -> bool:
+        return bool(self.fb.pathways) and self.fb.weight > 0.0
 
     def _open_loop(self) -> bool:
         """The pathways are not all closed at full weight (none chosen, fading, or not yet active)."""
