@@ -168,6 +168,7 @@ def test_runtime_zeta_and_alpha_change_the_gait(graph, probe, tmp_path):
     reach(t_slow + settle + strides * period / 0.8)
     slowed = state_now()
     assert probe.set_param("cpg", "alpha", 0.0).successful
+    t_stop = in_effect("alpha_requested", "0")  # the governor then brings the α command down (fall_rate)
     t_alpha = in_effect("alpha_command", "0")
     reach(t_alpha + settle_alpha)
     end = state_now()
@@ -182,7 +183,7 @@ def test_runtime_zeta_and_alpha_change_the_gait(graph, probe, tmp_path):
     assert not run.fell
     for foot, times in run.touchdowns.items():
         t = np.array(times)
-        intervals = np.diff(t[(t > t_slow + settle) & (t < t_alpha)])
+        intervals = np.diff(t[(t > t_slow + settle) & (t < t_stop)])
         assert len(intervals) >= 2, (foot, times)
         np.testing.assert_allclose(intervals, period / 0.8, rtol=0.03, err_msg=f"{foot}: {times}")
         assert not any(t > t_alpha + 3.0), (foot, times)  # α = 0: no more steps
