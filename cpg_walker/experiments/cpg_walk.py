@@ -63,9 +63,13 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float | None = None, alpha: f
         "zeta": zeta, "alpha": alpha, "feedback": bool(feedback is not None and feedback.pathways),
         "n_oscillators": int(ctrl.net.N),
         "transition": transition, "handover_s": round(source.handover, 3), "blend_s": blend_s,
-        "schedule": [list(s) for s in (schedule or [])], "refused": refused, "governed": governed,
+        "schedule": [list(s) for s in (schedule or [])],
         "touchdowns_s": {k: [round(x, 3) for x in v] for k, v in result.touchdowns.items()},
     })
+    if refused:  # the scheduled values refused (walk.json's keys are otherwise those of before the governor)
+        m["refused"] = refused
+    if not governed:
+        m["governed"] = False  # the raw controller (--governor off)
     if isinstance(source, FeedbackGaitSource):
         m["feedback_pathways"] = list(feedback.pathways)
         m["feedback_config"] = asdict(feedback.cfg)
