@@ -76,6 +76,9 @@ SLOW_SPIN_PERIOD_S = 0.02
 #: Realtime pacing more than this many wall s behind schedule re-bases the schedule instead of
 #: catching up in a burst of periods.
 MAX_LAG_S = 0.05
+#: Wall s every node named wait_for_subscriber must stay subscribed before the first state (discovery of a
+#: second node of that name can lag behind the first's subscriptions).
+SUBSCRIBER_SETTLE_S = 0.5
 #: Publish times kept for the latency statistics (by stamp); past the limit the oldest half is dropped
 #: (answers to states that old never come).
 PUBLISHED_KEEP = 256
@@ -416,11 +419,16 @@ class SimNode(Node):
         subscription on every state topic (a recorder that finds topics by scanning then has the run from
         its first period)."""
         name = self.wait_subscriber
+        since = None  # wall time from which every node of that name seen has subscribed
         while rclpy.ok():
             nodes = max(1, sum(n == name for n, _ in self.get_node_names_and_namespaces()))
             missing = [t for t in self.state_topics()  # every node of that name (e.g. a second recorder)
                        if sum(i.node_name == name for i in self.get_subscriptions_info_by_topic(t)) < nodes]
-            if not missing:
+            now = time.monotonic()
+            since = None if missing else (since or now)
+            # held for SUBSCRIBER_SETTLE_S: a second node of that name still being discovered (a recorder
+            # started just before) is counted too, instead of the run starting without it
+            if since is not None and now - since >= SUBSCRIBER_SETTLE_S:
                 self.get_logger().info(f"{name} subscribes to every state topic: starting")
                 return True
             self.get_logger().info(f"waiting for {name} to subscribe to {', '.join(missing)}",
