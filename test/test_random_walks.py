@@ -9,7 +9,7 @@ import pytest
 
 from cpg_walker.experiments.random_commands import _one, sequence, spec
 from cpg_walker.experiments.walk_runs import WalkSpec, run_many, run_walk
-from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
+from cpg_walker.walker.governor import GovernorConfig, command_range
 
 pytestmark = pytest.mark.slow
 
@@ -21,8 +21,9 @@ SEEDS = (100, 101)
 
 def test_sequences_are_seeded_and_inside_the_ranges():
     assert sequence(5) == sequence(5) and sequence(5) != sequence(6)
+    (zlo, zhi), (alo, ahi) = (command_range(n, GovernorConfig.load()) for n in ("zeta", "alpha"))
     for t, z, a in sequence(11, 600.0):
-        assert ZETA_RANGE[0] <= z <= ZETA_RANGE[1] and ALPHA_RANGE[0] <= a <= ALPHA_RANGE[1] and t < 600.0
+        assert zlo <= z <= zhi and alo <= a <= ahi and t < 600.0
     gaps = [b[0] - a[0] for a, b in zip(sequence(3, 600.0), sequence(3, 600.0)[1:], strict=False)]
     assert min(gaps) >= 8.0 - 0.01 and max(gaps) <= 16.0 + 0.01
 

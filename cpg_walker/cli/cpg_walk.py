@@ -31,6 +31,12 @@ def _schedule(text: str) -> list[tuple[float, float, float]]:
     return out
 
 
+def governed(governor: str | None, feedback: str | None) -> bool:
+    """``--governor`` as given, else on unless ``--feedback off`` (the paper's open-loop controller is
+    compared as published: commands straight to the oscillators)."""
+    return governor == "on" if governor is not None else feedback != "off"
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("cpg-walk", help="in-process walk driven by the learned humanoid CPG; walk.json")
     p.add_argument("--out", required=True, type=out_dir, help="output directory")
@@ -48,17 +54,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--blend", type=non_negative, default=1.0, metavar="S", help="hand-over cross-fade (s)")
     p.add_argument("--schedule", type=_schedule, default=None, metavar="T,Z,A;...",
                    help="commands (time, zeta, alpha) applied during the walk")
-    p.add_argument("--feedback", choices=("on", "off"), default="off",
-                   help="sensory feedback pathways (paper Sec. III-B; config/feedback.yaml), default off")
+    p.add_argument("--feedback", choices=("on", "off"), default="on",
+                   help="sensory feedback pathways (paper Sec. III-B; config/feedback.yaml): on (default, as "
+                        "cpg_node) | off (the paper's open-loop controller: no pathways and, unless "
+                        "--governor on, no governor)")
     p.add_argument("--pathways", default=None, metavar="P,P,...",
                    help="with --feedback on: any of lateral, pendulum, reset (the paper's), amplitude, "
-                        "reset_both, heading (ours); default: config/feedback.yaml's pathways")
+                        "reset_both, heading, ankle (ours); default: config/feedback.yaml's pathways")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="override a config/feedback.yaml value for this walk (repeatable)")
-    p.add_argument("--governor", choices=("on", "off"), default="on",
-                   help="the governor (walker/governor.py) between the commands and the CPG: on (default, "
-                        "as cpg_node) | off (the raw controller: values the robot cannot walk are commanded "
-                        "as they are)")
+    p.add_argument("--governor", choices=("on", "off"), default=None,
+                   help="the governor (walker/governor.py) between the commands and the CPG: on (default "
+                        "with feedback, as cpg_node) | off (default with --feedback off; the raw controller: "
+                        "values the robot cannot walk are commanded as they are)")
     p.add_argument("--no-render", action="store_true", help="skip the filmstrip")
     p.set_defaults(func=_run)
 
@@ -99,7 +107,7 @@ def _run(args: argparse.Namespace) -> int:
             raise InputError(f"--set: {exc}") from None
     m = run_cpg_walk(args.out, args.duration, args.zeta, args.alpha, args.oscillators, args.cpg,
                      args.transition, args.blend, args.schedule, render=not args.no_render, pathways=pathways,
-                     feedback_overrides=overrides, governed=args.governor == "on")
+                     feedback_overrides=overrides, governed=governed(args.governor, args.feedback))
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps", "lateral_drift_m",
             "heading_change_deg", "n_oscillators")
     print(json.dumps({k: m[k] for k in keys}))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 
 from cpg_walker.cli.checks import config_or_file, out_dir, positive, within
+from cpg_walker.cli.cpg_walk import governed
 from cpg_walker.cli.graph import add_foxglove_option
 from cpg_walker.cli.outcome import walk_status
 from cpg_walker.nodes.interface import PACINGS
@@ -32,9 +33,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "config/cpg.yaml)".format(*ALPHA_RANGE))
     p.add_argument("--governor", choices=("on", "off"), default=None,
                    help="cpg_node's governor (walker/governor.py): on (default, config/cpg.yaml) | off "
-                        "(the raw controller: values the robot cannot walk are commanded as they are)")
+                        "(default with --feedback off; the raw controller: values the robot cannot walk "
+                        "are commanded as they are)")
     p.add_argument("--feedback", choices=("on", "off"), default=None,
-                   help="cpg_node's sensory feedback pathways (default: its 'feedback', config/cpg.yaml)")
+                   help="cpg_node's sensory feedback pathways (default: its 'feedback', config/cpg.yaml); "
+                        "off: the paper's open-loop controller, without the governor unless --governor on")
     p.add_argument("--schedule", default=None, metavar="T,Z,A;...",
                    help="(sim s, zeta, alpha) changes, sent through cpg_node's SetParameters service when "
                         "the sim reaches each time (as 'cpg-walker param set /cpg zeta Z' would)")
@@ -60,8 +63,8 @@ def _run(args: argparse.Namespace) -> int:
     report = run_graph_walk(args.out, duration=args.duration, zeta=args.zeta, alpha=args.alpha,
                             cpg_file=args.cpg_file, feedback=feedback, schedule=schedule, pacing=args.pacing,
                             record=args.record, foxglove=args.foxglove,
-                            node_params=None if args.governor is None else
-                            {"cpg_node": {"governor": args.governor == "on"}})
+                            node_params=None if args.governor is None and args.feedback != "off" else
+                            {"cpg_node": {"governor": governed(args.governor, args.feedback)}})
     keys = ("fell", "fall_time_s", "duration_s", "distance_m", "mean_speed_mps", "steps",
             "lateral_drift_m", "heading_change_deg", "zeta", "alpha", "feedback", "real_time_factor")
     print(json.dumps({k: report[k] for k in keys}))

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.errors import InputError
-from cpg_walker.walker.controller import HumanoidCPG, modulation_error
+from cpg_walker.walker.controller import HumanoidCPG
 from cpg_walker.walker.feedback import FeedbackController
 from cpg_walker.walker.gait_source import CPGGaitSource, FeedbackGaitSource
-from cpg_walker.walker.governor import GovernorConfig
+from cpg_walker.walker.governor import GovernorConfig, command_error
 from cpg_walker.walker.learning import cpg_defaults, load_controller
 from cpg_walker.walker.loop import run_replay, summarize
 
@@ -42,16 +42,20 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float | None = None, alpha: f
     defaults = cpg_defaults()
     zeta = float(defaults["zeta"]) if zeta is None else zeta
     alpha = float(defaults["alpha"]) if alpha is None else alpha
+    gcfg = GovernorConfig.load() if governed else None
+    for name, value in (("zeta", zeta), ("alpha", alpha)):
+        if reason := command_error(name, value, gcfg):  # as cpg_node refuses to start
+            raise InputError(f"--{name}: {reason}")
     refused, kept = [], []
     for t, z, a in schedule or []:
-        reason = modulation_error("zeta", z) or modulation_error("alpha", a)
+        reason = command_error("zeta", z, gcfg) or command_error("alpha", a, gcfg)
         if reason:
             refused.append({"t_s": t, "zeta": z, "alpha": a, "reason": reason})
         else:
             kept.append((t, z, a))
     schedule = kept
     kw = dict(transition=transition, handover_s=handover_s, blend_s=blend_s, schedule=schedule, zeta=zeta,
-              alpha=alpha, governor=GovernorConfig.load() if governed else None)
+              alpha=alpha, governor=gcfg)
     source = CPGGaitSource(ctrl, **kw) if feedback is None else FeedbackGaitSource(ctrl, feedback, **kw)
     sim = Hoap2Sim()
     sim.reset()

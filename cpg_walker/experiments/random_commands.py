@@ -1,8 +1,8 @@
-"""Random command sequences, as a user turning the knobs would: a new (ζ, α) drawn uniformly from the
-declared ranges every ``min_gap_s`` to ``max_gap_s`` sim s (seeded: the same seed, the same sequence),
-walked in-process through the governor (walker/governor.py). `cpg-walker random-walks --seeds A-B --out
-DIR` walks one per seed and writes DIR/random_walks.json (each sequence, fell, fall time, distance);
-it exits 1 when any fell (its job is to walk)."""
+"""Random command sequences, as a user turning the knobs would: a new (ζ, α) drawn uniformly from
+cpg_node's declared ranges every ``min_gap_s`` to ``max_gap_s`` sim s (seeded: the same seed, the same
+sequence), walked in-process through the governor (walker/governor.py). `cpg-walker random-walks --seeds
+A-B --out DIR` walks one per seed and writes DIR/random_walks.json (each sequence, fell, fall time,
+distance); it exits 1 when any fell (its job is to walk)."""
 
 from __future__ import annotations
 
@@ -12,16 +12,20 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.experiments.walk_runs import WalkSpec, run_many, run_walk
-from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
+from cpg_walker.walker.governor import GovernorConfig, command_range
 
 #: Sim s between commands, and the first command's time (the CPG drives alone from ≈ 6.6 s).
 MIN_GAP_S, MAX_GAP_S, FIRST_S = 8.0, 16.0, 8.0
 
 
 def sequence(seed: int, duration_s: float = 120.0, min_gap_s: float = MIN_GAP_S, max_gap_s: float = MAX_GAP_S,
-             zeta_range: tuple[float, float] = ZETA_RANGE,
-             alpha_range: tuple[float, float] = ALPHA_RANGE) -> tuple[tuple[float, float, float], ...]:
-    """(t, ζ, α) commands from FIRST_S to ``duration_s``, rounded to 0.01."""
+             zeta_range: tuple[float, float] | None = None,
+             alpha_range: tuple[float, float] | None = None) -> tuple[tuple[float, float, float], ...]:
+    """(t, ζ, α) commands from FIRST_S to ``duration_s``, rounded to 0.01; the ranges default to cpg_node's
+    declared ones (with its governor: governor.command_range)."""
+    gcfg = GovernorConfig.load()
+    zeta_range = zeta_range or command_range("zeta", gcfg)
+    alpha_range = alpha_range or command_range("alpha", gcfg)
     rng = np.random.default_rng(seed)
     out, t = [], FIRST_S
     while t < duration_s:

@@ -46,14 +46,15 @@ class Watcher(Protocol):
 LEARN_WAIT_S = 600.0
 
 
-def check_modulation(zeta: float, alpha: float) -> None:
-    """The cpg_node's ranges, checked before any process starts."""
-    from cpg_walker.walker.controller import modulation_error
+def check_modulation(zeta: float, alpha: float, governed: bool = True) -> None:
+    """The cpg_node's ranges (with or without its governor), checked before any process starts."""
+    from cpg_walker.walker.governor import GovernorConfig, command_error
 
+    gcfg = GovernorConfig.load() if governed else None
     for name, value in (("zeta", zeta), ("alpha", alpha)):
-        reason = modulation_error(name, value)
+        reason = command_error(name, value, gcfg)
         if reason:
-            raise InputError(reason)
+            raise InputError(f"--{name}: {reason}")
 
 
 def parse_schedule(text: str) -> list[tuple[float, float, float]]:
@@ -214,7 +215,8 @@ def run_graph_walk(
             raise InputError(f"schedule time {t:g} s is outside the walk (0 to {duration:g} sim s)")
     zeta, alpha = (float(defaults[name]) if value is None else value
                    for name, value in (("zeta", zeta), ("alpha", alpha)))
-    check_modulation(zeta, alpha)
+    governed = (node_params or {}).get("cpg_node", {}).get("governor", defaults["governor"])
+    check_modulation(zeta, alpha, bool(governed))
     cpg_file = defaults["cpg_file"] if cpg_file is None else cpg_file
     learn_now = not cpg_file
     ctrl = None

@@ -44,7 +44,8 @@ class GraphSpec:
     def node_params(self) -> dict[str, dict[str, object]]:
         """Each node's start-up parameters, the overrides of its parameters file (validated: ValueError)."""
         from cpg_walker.nodes.interface import PACINGS, controllers_lockstep
-        from cpg_walker.walker.controller import modulation_error
+        from cpg_walker.paths import ros_parameters
+        from cpg_walker.walker.governor import GovernorConfig, command_error
 
         pacing, duration = self.sim_value("pacing"), self.sim_value("duration")
         if pacing not in PACINGS:
@@ -65,9 +66,13 @@ class GraphSpec:
                 continue
             if self.player:
                 raise InputError(f"--{name} is a cpg_node parameter; not with --player")
-            reason = modulation_error(name, value)
+            governed = ros_parameters("cpg.yaml", "cpg")["governor"]
+            for node, pname, pvalue in self.params:
+                if (node, pname) == ("cpg_node", "governor"):
+                    governed = pvalue
+            reason = command_error(name, value, GovernorConfig.load() if governed is True else None)
             if reason:
-                raise InputError(reason)
+                raise InputError(f"--{name}: {reason}")
             out["cpg_node"][name] = float(value)
         if self.foxglove is not None:
             from cpg_walker.nodes.foxglove_view import parse_address

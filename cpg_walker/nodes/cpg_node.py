@@ -31,7 +31,7 @@ from cpg_walker.nodes.messages import (
     stamp,
     stamp_ns,
 )
-from cpg_walker.nodes.params import by_name, declare_params
+from cpg_walker.nodes.params import by_name, declare, declare_params, descriptor
 from cpg_walker.nodes.runtime import (
     HotPath,
     Throttle,
@@ -44,10 +44,9 @@ from cpg_walker.nodes.runtime import (
 from cpg_walker.nodes.validation import reason_key, to_ns, validate_imu, validate_load
 from cpg_walker.timing import latency_summary
 from cpg_walker.walker.cmd_vel import LIMIT_KEYS, CmdVelLimits, check_twist
-from cpg_walker.walker.controller import modulation_error
 from cpg_walker.walker.cpg_driver import CPGDriver, FeedbackFade
 from cpg_walker.walker.feedback import FeedbackController
-from cpg_walker.walker.governor import GovernorConfig
+from cpg_walker.walker.governor import GovernorConfig, command_error
 from cpg_walker.walker.learning import load_controller
 
 
@@ -72,9 +71,11 @@ class CPGNode(Node):
 
     def __init__(self, **node_options) -> None:
         super().__init__(ifc.NODE_NAMES[ifc.CPG_NODE], **node_options)
-        v = declare_params(self, specs.CPG)
+        v = {"governor": declare(self, "governor", descriptor(SPEC["governor"]))}  # alpha's range needs it
+        v |= declare_params(self, [s for s in specs.cpg_specs(v["governor"]) if s.name != "governor"])
+        governor = GovernorConfig.load() if v["governor"] else None
         for name in ("zeta", "alpha"):
-            if reason := modulation_error(name, v[name]):
+            if reason := command_error(name, v[name], governor):
                 raise ValueError(reason)
         self.scheduling = scheduling_request(v)  # applied once started (runtime.settle_process)
         fb_cfg, pathways = cpg_params.declare_feedback(self)
@@ -104,7 +105,7 @@ class CPGNode(Node):
             monitor_period_ns=round(v["monitor_period"] * 1e9), horizon_s=v["horizon"],
             horizon_step_ns=round(v["horizon_step"] * 1e9), horizon_stop_s=v["horizon_stop"],
             rejoin_settle_ns=round(v["rejoin_settle"] * 1e9),
-            governor=GovernorConfig.load() if v["governor"] else None)
+            governor=governor)
         self.get_logger().info(f"CPG warmed up in {self.driver.warm_up():.3f} s")
         self.add_on_set_parameters_callback(self._on_set)
         self.builder = JointStateBuilder(self.driver.source.names, fields=("position", "velocity"))
@@ -193,7 +194,7 @@ class CPGNode(Node):
         modulation = {n: values[n] for n in ("zeta", "alpha") if n in values}
         try:
             for name, value in modulation.items():
-                if reason := modulation_error(name, value):
+                if reason := command_error(name, value, d.governor_config):
                     raise ValueError(reason)
             pathways = cpg_params.pathway_list(values["feedback_pathways"]) \
                 if "feedback_pathways" in values else None

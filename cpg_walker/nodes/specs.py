@@ -20,6 +20,7 @@ from cpg_walker.robot.joints import GROUPS, MAX_TORQUE_NM
 from cpg_walker.robot.pid import GAINS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 from cpg_walker.walker.feedback import PATHWAYS, FeedbackConfig
+from cpg_walker.walker.governor import GovernorConfig, command_range
 
 SIM = (
     string("pacing", "realtime | fast | lockstep", read_only=True),
@@ -152,8 +153,13 @@ CPG = (
            "start-up", read_only=True),
     integer("n_oscillators", "oscillators per DOF when learning at start-up (0 = the learning settings' N)",
             0, 20, read_only=True),
+    boolean("governor", "reach every zeta/alpha along a path that walks (walker/governor.py, "
+            f"config/governor.yaml); false: the raw controller (alpha up to {ALPHA_RANGE[1]:g})",
+            read_only=True),
     double("zeta", "frequency ratio ζ of the oscillators (negative: backwards)", *ZETA_RANGE),
-    double("alpha", "amplitude (step length) scale α of the oscillators", *ALPHA_RANGE),
+    double("alpha", "amplitude (step length) scale α of the oscillators: up to the longest step that walked "
+           f"(config/governor.yaml's envelope; governor false: up to {ALPHA_RANGE[1]:g})",
+           *command_range("alpha", GovernorConfig.load())),
     boolean("lookahead", "also send the next period's target on each tick", read_only=True),
     double("monitor_period", "sim s between /cpg/state and /diagnostics messages", 0.002, 60.0,
            read_only=True),
@@ -170,8 +176,6 @@ CPG = (
     boolean("lockstep", "wait for the sensor samples stamped like each /clock tick (deterministic; with the "
             "sim's lockstep pacing)", read_only=True),
     boolean("feedback", "close the sensory feedback pathways (false: the open-loop CPG)"),
-    boolean("governor", "reach every zeta/alpha along a path that walks (walker/governor.py, "
-            "config/governor.yaml); false: the raw controller", read_only=True),
     double("sensor_timeout", "sim s without a newer /imu or /foot_load sample before feedback fades out",
            1e-3, 10.0),
     double("feedback_fade", "sim s over which feedback fades out (stale sensors, switched off) or back in",
@@ -185,6 +189,15 @@ CPG = (
            "package's config/)"),
     *STATS,
 )
+
+
+def cpg_specs(governed: bool) -> tuple[ParamSpec, ...]:
+    """cpg_node's specs: alpha's range is what walks with the governor (CPG), the raw CPG's without."""
+    if governed:
+        return CPG
+    return tuple(double(s.name, s.description, *ALPHA_RANGE) if s.name == "alpha" else s for s in CPG)
+
+
 #: FeedbackConfig field types that are ROS parameters, as ParamSpec types.
 FEEDBACK_FIELD_TYPES = {float: "double", str: "string", bool: "bool"}
 

@@ -39,9 +39,14 @@ How we read the paper:
   when feedback takes over, or the first observed one: ``heading_reference``; advanced by the commanded
   ``turn_rate``) with an antisymmetric hip-yaw
   oscillation q_yaw,R = −q_yaw,L = u·cos(θ_ref − φ_TD), u = heading_gain·(filtered yaw error): each
-  stance hip turns the pelvis over its planted foot by ≈ 2u per step.
+  stance hip turns the pelvis over its planted foot by ≈ 2u per step. ``ankle``: an ankle strategy on
+  the IMU — both ankles' pitch (Ankle1) and roll (Ankle2) targets offset by
+  Δq_pitch = k_p·ψ_pend + k_pd·ω_y and Δq_roll = k_r·ψ_lat + k_rd·ω_x (ψ the filtered tilt, ω the chest's
+  angular velocity), clipped to ``ankle_limit_rad``: a forward lean or pitch rate plantar-flexes, a right
+  lean or roll rate rolls the soles against it, which moves the centre of pressure under the falling
+  chest (it damps the growing sway that preceded the random sequences' falls).
 
-Every action (g, reset shift, amplitude factors, hip-yaw offsets) is scaled by ``weight`` ∈ [0, 1]
+Every action (g, reset shift, amplitude factors, hip-yaw and ankle offsets) is scaled by ``weight`` ∈ [0, 1]
 (a ROS node fades feedback out with it when its sensor data go stale); weight 0 is the open loop.
 """
 
@@ -60,7 +65,7 @@ from cpg_walker.robot.joints import CONTROLLED_JOINTS, PAPER_LEG_DOFS, SIDES
 
 #: The paper's pathways (Sec. III-B, as printed) and ours (module docstring).
 PAPER_PATHWAYS = ("lateral", "pendulum", "reset")
-PATHWAYS = (*PAPER_PATHWAYS, "amplitude", "reset_both", "heading")
+PATHWAYS = (*PAPER_PATHWAYS, "amplitude", "reset_both", "heading", "ankle")
 
 
 def _dofs(paper: str) -> tuple[int, ...]:
@@ -75,6 +80,9 @@ ANKLE1 = _dofs("Ankle1")
 RIGHT_HIP2 = CONTROLLED_JOINTS.index(f"rleg_joint_{PAPER_LEG_DOFS['Hip2']}")
 #: hip yaw joints (``*_joint_1``, not driven by the CPG) as (left, right) names
 HIP_YAW = tuple(f"{s}leg_joint_1" for s in SIDES)
+#: The ankle pathway's joints (names): both Ankle1 (pitch), both Ankle2 (roll).
+ANKLE_PITCH_JOINTS = tuple(f"{s}leg_joint_{PAPER_LEG_DOFS['Ankle1']}" for s in SIDES)
+ANKLE_ROLL_JOINTS = tuple(f"{s}leg_joint_{PAPER_LEG_DOFS['Ankle2']}" for s in SIDES)
 
 
 @dataclass(frozen=True)
@@ -115,6 +123,12 @@ class FeedbackConfig:
     heading_limit_rad: float  # |u| clip
     heading_time_constant_s: float  # low-pass on the heading error (the gait's own yaw sway)
     heading_reference: str  # "handover": the yaw when feedback takes over | "start": the first observed yaw
+    # ours ("ankle"): both ankles' pitch/roll target offsets from the chest's tilt and angular velocity
+    ankle_pitch_gain: float  # rad per rad of ψ_pend
+    ankle_pitch_rate_gain: float  # rad per rad/s of pitch rate (ω_y)
+    ankle_roll_gain: float  # rad per rad of lateral tilt
+    ankle_roll_rate_gain: float  # rad per rad/s of roll rate (ω_x)
+    ankle_limit_rad: float  # |offset| clip, each axis
 
     def __post_init__(self) -> None:
         if self.lateral_mode not in ("abs", "signed"):
@@ -135,6 +149,12 @@ class FeedbackConfig:
                      "heading_time_constant_s", "reset_min_abs_zeta", "reset_min_alpha"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not 0.0 <= self.ankle_limit_rad <= 0.3:
+            raise InputError(f"ankle_limit_rad must be in [0, 0.3] rad (ankle offsets), "
+                             f"got {self.ankle_limit_rad}")
+        for name in ("ankle_pitch_gain", "ankle_pitch_rate_gain", "ankle_roll_gain", "ankle_roll_rate_gain"):
+            if abs(getattr(self, name)) > 5.0:
+                raise InputError(f"{name} must be in [-5, 5], got {getattr(self, name)}")
         if self.heading_limit_rad > 0.5:
             raise InputError(f"heading_limit_rad must be <= 0.5 rad (hip-yaw offsets), "
                              f"got {self.heading_limit_rad}")
@@ -427,6 +447,15 @@ class FeedbackController:
             if left:
                 out.append((wrap(phi + math.pi), k))
         return out
+
+    def ankle_offsets(self) -> tuple[float, float]:
+        """(pitch, roll) offsets (rad) of both ankles' targets ("ankle"; zeros without it)."""
+        if "ankle" not in self.pathways or self._weight <= 0.0:
+            return 0.0, 0.0
+        c, lim = self.cfg, self.cfg.ankle_limit_rad
+        dp = c.ankle_pitch_gain * self.psi[1] + c.ankle_pitch_rate_gain * float(self.gyro[1])
+        dr = c.ankle_roll_gain * self.psi[0] + c.ankle_roll_rate_gain * float(self.gyro[0])
+        return (self._weight * min(max(dp, -lim), lim), self._weight * min(max(dr, -lim), lim))
 
     def heading_amplitude(self) -> float:
         """u (rad) of the heading pathway's hip-yaw oscillation (0 without it or before the capture)."""

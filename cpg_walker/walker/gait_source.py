@@ -18,6 +18,8 @@ from cpg_walker.robot.joints import JOINT_NAMES
 from cpg_walker.walker.controller import DOFS, HumanoidCPG
 from cpg_walker.walker.feedback import (
     ANKLE2,
+    ANKLE_PITCH_JOINTS,
+    ANKLE_ROLL_JOINTS,
     HIP_YAW,
     KNEE,
     RIGHT_HIP2,
@@ -27,6 +29,11 @@ from cpg_walker.walker.feedback import (
     touchdown_phase,
 )
 from cpg_walker.walker.governor import Governor, GovernorConfig
+
+#: Indices (of all joints) the ankle pathway offsets; sim s over which a forecast's offset dies out.
+ANKLE_PITCH = np.array([JOINT_NAMES.index(j) for j in ANKLE_PITCH_JOINTS])
+ANKLE_ROLL = np.array([JOINT_NAMES.index(j) for j in ANKLE_ROLL_JOINTS])
+ANKLE_HOLD_S = 0.1
 
 
 class CPGGaitSource:
@@ -297,6 +304,7 @@ class FeedbackGaitSource(CPGGaitSource):
         self.touchdown_log: list[tuple[float, float, float]] = []  # (t, applied ζ, that phase), right foot
         self._yaw_u = 0.0
         self._yaw_idx = np.array([JOINT_NAMES.index(j) for j in HIP_YAW])
+        self._ankle = (0.0, 0.0)  # the ankle pathway's (pitch, roll) offsets
 
     def observe(self, t: float, quat_wxyz: np.ndarray, gyro: np.ndarray, loads: tuple[float, float]) -> None:
         fb = self.fb
@@ -319,6 +327,7 @@ class FeedbackGaitSource(CPGGaitSource):
             d = phase_reset(st, self.ctrl.net.omega, target, strength=strength)
             fb.resets.append((t, d))
         self._yaw_u = fb.heading_amplitude()
+        self._ankle = fb.ankle_offsets()
         if self.keep_traces and t >= self._next_trace - 1e-9:  # one per trace_dt, whatever the tick rate
             self.g_trace.append((t, *fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
             self._next_trace = t + self.trace_dt
@@ -336,26 +345,35 @@ class FeedbackGaitSource(CPGGaitSource):
         super().reenter(t, zeta, alpha)
         self.active_from = self.handover + self.blend
         self._yaw_u = 0.0
+        self._ankle = (0.0, 0.0)
 
     def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         q, qd = super().targets(t)
-        if self._yaw_u != 0.0 and t >= self.active_from:
+        if (self._yaw_u != 0.0 or self._ankle != (0.0, 0.0)) and t >= self.active_from:
             q, qd = q.copy(), qd.copy()
             self._add_hip_yaw(q, qd, 0.0)
+            q[ANKLE_PITCH] += self._ankle[0]
+            q[ANKLE_ROLL] += self._ankle[1]
         return q, qd
 
     def forecast(self, times: np.ndarray, fade: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """`CPGGaitSource.forecast` plus the heading pathway's hip-yaw oscillation at the held u (its
         phase advanced at the current frequency; ``fade`` scales it with the steps)."""
         q, qd = super().forecast(times, fade)
-        if self._yaw_u != 0.0:
+        if self._yaw_u != 0.0 or self._ankle != (0.0, 0.0):
             times = np.asarray(times, dtype=float).reshape(-1)
             for k in np.flatnonzero(times >= self.active_from):
-                self._add_hip_yaw(q[k], qd[k], max(float(times[k]) - self._t_net, 0.0),
-                                  1.0 if fade is None else float(fade[k]))
+                ahead = max(float(times[k]) - self._t_net, 0.0)
+                scale = 1.0 if fade is None else float(fade[k])
+                self._add_hip_yaw(q[k], qd[k], ahead, scale)
+                hold = scale * math.exp(-ahead / ANKLE_HOLD_S)  # a reaction to now: it dies out ahead
+                q[k, ANKLE_PITCH] += hold * self._ankle[0]
+                q[k, ANKLE_ROLL] += hold * self._ankle[1]
         return q, qd
 
     def _add_hip_yaw(self, q: np.ndarray, qd: np.ndarray, ahead_s: float, scale: float = 1.0) -> None:
+        if self._yaw_u == 0.0:
+            return
         net = self.ctrl.net
         st = net.state
         w = float(net.frequencies()[RIGHT_HIP2, 0])

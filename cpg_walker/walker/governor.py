@@ -34,6 +34,7 @@ import numpy as np
 
 from cpg_walker.errors import InputError
 from cpg_walker.paths import config_path
+from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE, modulation_error
 
 #: After a reversal the robot steps off at |ζ| at most this (the learned rhythm), then speeds up.
 STEP_OFF_ZETA = 1.0
@@ -57,6 +58,11 @@ class Envelope:
                 raise InputError(f"governor envelope {name}: |zeta| points must be > 0, strictly increasing, "
                                  f"with finite alpha_max >= 0; got {pts}")
 
+    @property
+    def alpha_top(self) -> float:
+        """The largest α_max of either direction."""
+        return max(a for pts in (self.forward, self.backward) for _, a in pts)
+
     def alpha_max(self, zeta: float) -> float:
         pts = self.forward if zeta >= 0 else self.backward
         z = abs(zeta)
@@ -79,6 +85,13 @@ class GovernorConfig:
     zeta_rate: float = 0.25
     reverse_alpha: float = 0.05
     reverse_zeta_tolerance: float = 0.1
+
+    @property
+    def alpha_limit(self) -> float:
+        """The top of the α range that walks: the largest α_max of the envelopes (longer steps fell at every
+        ζ measured), at most the CPG's own limit."""
+        tops = [e.alpha_top for e in (self.envelope, self.open_loop) if e is not None]
+        return min(max(tops), ALPHA_RANGE[1])
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> GovernorConfig:
@@ -117,6 +130,28 @@ class GovernorConfig:
         if any(not (math.isfinite(v) and v > 0) for v in rates.values()):
             raise InputError(f"{p}: rates and tolerances must be finite and > 0, got {rates}")
         return cls(closed, open_loop, **rates)
+
+
+def command_range(name: str, governor: GovernorConfig | None) -> tuple[float, float]:
+    """The accepted range of the ``zeta``/``alpha`` command: the CPG's own (controller.ZETA_RANGE,
+    ALPHA_RANGE) without a governor; with one, α only up to what walks (``alpha_limit``)."""
+    if name == "zeta":
+        return ZETA_RANGE
+    return (ALPHA_RANGE[0], ALPHA_RANGE[1] if governor is None else governor.alpha_limit)
+
+
+def command_error(name: str, value: object, governor: GovernorConfig | None) -> str | None:
+    """Why ``value`` is not an acceptable ``zeta``/``alpha`` command (None if it is): not a finite number
+    in the CPG's range, or (with a governor) a step length longer than any that walked."""
+    if reason := modulation_error(name, value):
+        return reason
+    lo, hi = command_range(name, governor)
+    if not lo <= float(value) <= hi:
+        return (f"{name} must be in [{lo:g}, {hi:g}], got {value!r}: longer steps fell at every zeta "
+                f"measured "
+                f"(the governor's envelope, config/governor.yaml; without the governor the raw CPG takes "
+                f"up to {ALPHA_RANGE[1]:g})")
+    return None
 
 
 class Governor:
