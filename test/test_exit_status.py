@@ -25,7 +25,8 @@ def test_through_the_governor_the_step_length_is_refused_and_the_walkable_part_w
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(err) == 1 and "--alpha: alpha must be in [0, 1], got 2.0" in err[0], err
     assert "longer steps fell at every zeta" in err[0]
-    fast = [a if a != "2.0" or i != FAST_FALL.index("--alpha") + 1 else "1.0" for i, a in enumerate(FAST_FALL)]
+    k = FAST_FALL.index("--alpha") + 1
+    fast = [*FAST_FALL[:k], "1.0", *FAST_FALL[k + 1:]]
     status = main(["cpg-walk", *fast, "--governor", "on", "--out", str(tmp_path / "governed")])
     walk = json.loads((tmp_path / "governed" / "walk.json").read_text())
     assert status == 0 and not walk["fell"] and "governed" not in walk, capsys.readouterr().err[-500:]

@@ -119,3 +119,24 @@ def test_a_scheduled_value_out_of_range_is_refused_recorded_and_the_walk_goes_on
     assert m["refused"] == [{"t_s": 7.0, "zeta": 3.0, "alpha": 1.0, "reason": m["refused"][0]["reason"]}]
     assert "zeta" in m["refused"][0]["reason"] and "[-2" in m["refused"][0]["reason"]
     assert m["schedule"] == [[7.5, 1.2, 0.8]] and not m["fell"] and "governed" not in m  # on: the default
+
+
+def test_the_declared_alpha_range_is_the_longest_step_that_walked():
+    """cpg_node's alpha range with the governor tells the truth: up to the envelopes' largest alpha_max
+    (longer steps fell at every zeta), refused above with that reason; without it, the raw CPG's range."""
+    from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
+    from cpg_walker.walker.governor import command_error, command_range
+
+    assert CFG.alpha_limit == 1.2  # ENV's largest alpha_max
+    wider = GovernorConfig(ENV, open_loop=Envelope(forward=((0.3, 1.4),), backward=((0.3, 0.2),)))
+    assert wider.alpha_limit == 1.4 and GovernorConfig(Envelope(((0.3, 9.0),), ((0.3, 9.0),))).alpha_limit \
+        == ALPHA_RANGE[1]  # never beyond what the CPG takes
+    assert command_range("alpha", CFG) == (0.0, 1.2) and command_range("zeta", CFG) == ZETA_RANGE
+    assert command_range("alpha", None) == ALPHA_RANGE
+    why = command_error("alpha", 1.3, CFG)
+    assert why.startswith("alpha must be in [0, 1.2], got 1.3") and "longer steps fell" in why
+    assert command_error("alpha", 1.2, CFG) is None and command_error("alpha", 1.3, None) is None
+    assert "finite" in command_error("alpha", math.inf, CFG) and command_error("zeta", 2.5, CFG)
+    packaged = GovernorConfig.load()
+    assert packaged.alpha_limit == max(a for env in (packaged.envelope, packaged.open_loop)
+                                       for pts in (env.forward, env.backward) for _, a in pts)

@@ -5,6 +5,8 @@ shortens the steps) walks 120 s; the generator is seeded and stays inside the ra
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import pytest
 
 from cpg_walker.experiments.random_commands import _one, sequence, spec
@@ -36,6 +38,29 @@ def test_random_sequences_walk():
 
 @pytest.mark.parametrize("zeta", [0.3, -0.3])
 def test_slow_walking_from_standing(zeta):
-    r = run_walk(WalkSpec(zeta=zeta, alpha=1.0, duration_after_s=120.0, variant="off", governed=True))
+    r = run_walk(WalkSpec(zeta=zeta, alpha=1.0, duration_after_s=120.0, variant="ours", governed=True))
     assert not r["fell"], r["fall_time_s"]
     assert r["distance_m"] * zeta > 0  # it went the commanded way
+
+
+#: The sequence walked through the graph: seed 100's first 60 s (four reversals: 1.34, -1.83, 1.16, -1.24,
+#: 0.52). `cpg-walker walk --duration 60 --schedule ...` with it walked 1.27 m without a fall.
+GRAPH_SEED, GRAPH_S = 100, 60.0
+
+
+@pytest.mark.ros
+def test_a_random_sequence_walks_through_the_graph_in_lockstep(tmp_path, ros_domain):
+    """The same generator through sim_node + pid_node + cpg_node in lockstep, each change sent through
+    cpg_node's SetParameters service as `ros2 param set` would: accepted (inside the declared ranges), no
+    fall."""
+    from ros_helpers import SimWatchdog, sim_deadline
+
+    from cpg_walker.experiments.walk_graph import run_graph_walk
+
+    schedule = list(sequence(GRAPH_SEED, GRAPH_S))
+    assert sum((a[1] > 0) != (b[1] > 0) for a, b in pairwise(schedule)) >= 3
+    with SimWatchdog(ros_domain):
+        report = run_graph_walk(tmp_path / "walk", duration=GRAPH_S, schedule=schedule,
+                                timeout=sim_deadline(GRAPH_S))
+    assert not report["fell"], report["fall_time_s"]
+    assert report["duration_s"] == pytest.approx(GRAPH_S, abs=0.02) and not report.get("refused"), report

@@ -28,10 +28,22 @@ def test_modulation_parameters_validated_through_the_service(graph, probe):
         assert not result.successful and name in result.reason, (name, bad, result.reason)
     wrong = probe.set_param("cpg", "zeta", string("fast"))
     assert not wrong.successful and wrong.reason
+    # the range tells the truth: a step longer than any that walked is refused, with the reason
+    longer = probe.set_param("cpg", "alpha", double(1.2))
+    assert not longer.successful and "alpha must be in [0, 1]" in longer.reason, longer.reason
+    assert "longer steps fell at every zeta" in longer.reason
     assert probe.set_param("cpg", "zeta", double(0.8)).successful
-    assert probe.set_param("cpg", "alpha", double(1.2)).successful
-    assert [v.double_value for v in probe.get_params("cpg", ["zeta", "alpha"])] == [0.8, 1.2]
+    assert probe.set_param("cpg", "alpha", double(0.7)).successful
+    assert [v.double_value for v in probe.get_params("cpg", ["zeta", "alpha"])] == [0.8, 0.7]
     assert "commanded zeta=0.8" in graph.procs["cpg_node"].log()
+
+
+def test_without_the_governor_the_raw_cpg_takes_longer_steps(graph, probe):
+    graph.start("cpg_node", governor=False, alpha=1.5)
+    assert probe.set_param("cpg", "alpha", double(1.8)).successful
+    refused = probe.set_param("cpg", "alpha", double(2.01))
+    assert not refused.successful and "alpha must be in [0, 2]" in refused.reason, refused.reason
+    assert [v.double_value for v in probe.get_params("cpg", ["alpha"])] == [1.8]
 
 
 def test_corrupt_cpg_file_is_a_clear_error(graph, tmp_path):
@@ -43,7 +55,7 @@ def test_corrupt_cpg_file_is_a_clear_error(graph, tmp_path):
     assert "bad.yaml" in log and "Traceback" not in log
 
 
-@pytest.mark.parametrize("params", [{"zeta": 3.0}, {"alpha": -0.5}, {"zeta": math.nan}])
+@pytest.mark.parametrize("params", [{"zeta": 3.0}, {"alpha": -0.5}, {"zeta": math.nan}, {"alpha": 1.5}])
 def test_bad_start_up_modulation_is_a_clear_error(graph, params):
     graph.start("cpg_node", **params)
     assert graph.wait("cpg_node", START_S) == 2

@@ -291,6 +291,23 @@ def name_refusals(node: Node) -> None:
     node.set_parameters_atomically = set_parameters_atomically
 
 
+def explain_refusals(node: Node, explain) -> None:
+    """A refused change's reason from ``explain(name, value)`` (str, or None: nothing to add) where it says
+    more than rclpy's own check (a descriptor's range says only "out of range"): wraps the node's
+    ``set_parameters_atomically`` as ``name_refusals`` does."""
+    plain = node.set_parameters_atomically
+
+    def set_parameters_atomically(parameters):
+        result = plain(parameters)
+        if not result.successful:
+            why = [r for p in parameters if (r := explain(p.name, p.value))]
+            if why:
+                result.reason = "; ".join(why)
+        return result
+
+    node.set_parameters_atomically = set_parameters_atomically
+
+
 def packaged_parameters(node: Node) -> dict:
     """The ros__parameters of the node's packaged parameters file (empty if there is none), cached."""
     cached = getattr(node, "_packaged_params", None)
