@@ -113,21 +113,24 @@ def fig8_specs(cfg: dict) -> list[WalkSpec]:
 
 
 def push_bisection(task: dict) -> dict:
-    """Largest impulse (N s) of a lateral torso push at ζ recovered (no fall for ``after_s``): bisection
-    on [0, max_impulse_Ns]. The result is the largest recovered impulse tried (0: none)."""
+    """Largest impulse (N s) of a lateral torso push at ζ (and ``alpha``, default 1; 0: standing)
+    recovered (no fall for ``after_s``): bisection on [0, max_impulse_Ns] (``governed``: through the
+    governor, as cpg_node). The result is the largest recovered impulse tried (0: none)."""
     lo, hi = 0.0, float(task["max_impulse_Ns"])
     tried = []
     for _ in range(int(task["iterations"])):
         mid = 0.5 * (lo + hi)
-        spec = WalkSpec(zeta=float(task["zeta"]), start="standing", variant=task["variant"],
+        spec = WalkSpec(zeta=float(task["zeta"]), alpha=float(task.get("alpha", 1.0)), start="standing",
+                        variant=task["variant"],
                         duration_after_s=float(task["at_s"]) + float(task["after_s"]),
-                        transition=task["transition"],
+                        transition=task["transition"], governed=bool(task.get("governed", False)),
                         push=Push(float(task["at_s"]), mid, float(task["duration_s"]),
                                   float(task["direction"])))
         m = run_walk(spec)
         tried.append({"impulse_Ns": round(mid, 4), "fell": m["fell"], "fall_time_s": m["fall_time_s"]})
         lo, hi = (mid, hi) if not m["fell"] else (lo, mid)
     return {"variant": task["variant"], "direction": task["direction"], "zeta": task["zeta"],
+            "alpha": float(task.get("alpha", 1.0)),
             "max_recovered_impulse_Ns": round(lo, 4), "first_fall_impulse_Ns": round(hi, 4),
             "resolution_Ns": round(hi - lo, 4), "tried": tried}
 
