@@ -10,6 +10,7 @@ from cpg_walker.cli.checks import config_or_file, count, non_negative, number, o
 from cpg_walker.cli.outcome import walk_status
 from cpg_walker.errors import InputError
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
+from cpg_walker.walker.governor import GovernorConfig
 
 
 def _schedule(text: str) -> list[tuple[float, float, float]]:
@@ -44,7 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--zeta", type=within(*ZETA_RANGE), default=None,
                    help="frequency ratio (negative = backwards; default: cpg_node's, config/cpg.yaml)")
     p.add_argument("--alpha", type=within(*ALPHA_RANGE), default=None,
-                   help="amplitude (step length) scale (default: cpg_node's, config/cpg.yaml)")
+                   help=f"amplitude (step length) scale, in [0, {GovernorConfig.load().alpha_limit:g}] "
+                        f"with the governor, [{ALPHA_RANGE[0]:g}, {ALPHA_RANGE[1]:g}] without (default: "
+                        "cpg_node's, config/cpg.yaml)")
     p.add_argument("--oscillators", type=count, default=None, metavar="N",
                    help="oscillators per DOF (learns now unless config/cpg_humanoid.yaml has this N)")
     p.add_argument("--cpg", default=None, type=config_or_file, metavar="FILE",

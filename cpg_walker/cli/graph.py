@@ -11,6 +11,7 @@ from cpg_walker.cli.outcome import fall_line, report_fall
 from cpg_walker.errors import InputError
 from cpg_walker.nodes.interface import PACINGS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
+from cpg_walker.walker.governor import GovernorConfig
 
 ALIASES = {"sim": "sim_node", "pid": "pid_node", "cpg": "cpg_node", "player": "target_player_node",
            "target_player": "target_player_node", "foxglove": "foxglove_node"}
@@ -25,7 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--zeta", type=within(*ZETA_RANGE), default=None, metavar="Z",
                    help=f"cpg_node's zeta, in [{ZETA_RANGE[0]:g}, {ZETA_RANGE[1]:g}]")
     p.add_argument("--alpha", type=within(*ALPHA_RANGE), default=None, metavar="A",
-                   help=f"cpg_node's alpha, in [{ALPHA_RANGE[0]:g}, {ALPHA_RANGE[1]:g}]")
+                   help=f"cpg_node's alpha, in [0, {GovernorConfig.load().alpha_limit:g}] with its governor, "
+                        f"[{ALPHA_RANGE[0]:g}, {ALPHA_RANGE[1]:g}] without")
     p.add_argument("--player", action="store_true",
                    help="target_player_node (the recorded gait) instead of cpg_node")
     p.add_argument("--domain-id", type=domain_id, default=None, metavar="N",

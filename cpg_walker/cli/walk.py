@@ -14,6 +14,7 @@ from cpg_walker.cli.graph import add_foxglove_option
 from cpg_walker.cli.outcome import walk_status
 from cpg_walker.nodes.interface import PACINGS
 from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
+from cpg_walker.walker.governor import GovernorConfig
 
 
 def _cpg_file(text: str) -> str:
@@ -29,8 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="frequency ratio of the oscillators, in [{:g}, {:g}] (default: cpg_node's, "
                         "config/cpg.yaml)".format(*ZETA_RANGE))
     p.add_argument("--alpha", type=within(*ALPHA_RANGE), default=None, metavar="A",
-                   help="amplitude (step length) scale, in [{:g}, {:g}] (default: cpg_node's, "
-                        "config/cpg.yaml)".format(*ALPHA_RANGE))
+                   help="amplitude (step length) scale, in [0, {:g}] with the governor (the longest step "
+                        "that walked), [{:g}, {:g}] without (default: cpg_node's, config/cpg.yaml)".format(
+                            GovernorConfig.load().alpha_limit, *ALPHA_RANGE))
     p.add_argument("--governor", choices=("on", "off"), default=None,
                    help="cpg_node's governor (walker/governor.py): on (default, config/cpg.yaml) | off "
                         "(default with --feedback off; the raw controller: values the robot cannot walk "
