@@ -50,8 +50,8 @@ def test_param_and_topic_tools_against_a_running_graph(graph, probe):
     assert got.returncode == 0 and got.stdout.strip() == "Double value is: 0.8", got
     one = cli("param", "set", "/cpg", "alpha", "1", *DISCOVERY)  # an integer for a double: sent as 1.0
     assert one.returncode == 0, one.stderr
-    for bad, reason in (("nan", "zeta out of range"), ("5", "zeta out of range"),
-                        ("fast", "Wrong parameter type")):  # the node's (rclpy's) reasons
+    for bad, reason in (("nan", "zeta must be finite"), ("5", "zeta must be in [-2, 2], got 5.0"),
+                        ("fast", "zeta must be a number (double), got str 'fast'")):  # the node's reasons
         r = cli("param", "set", "/cpg", "zeta", bad, *DISCOVERY)
         assert r.returncode == 1, (bad, r)
         assert r.stderr.startswith("Setting parameter failed: ") and reason in r.stderr, (bad, r.stderr)

@@ -1,4 +1,5 @@
-"""`cpg-walker random-walks --seeds A-B --out DIR [--duration S] [--feedback ours|paper|off] [--jobs N]`:
+"""`cpg-walker random-walks --seeds A-B --out DIR [--duration S] [--feedback ours|paper|off] [--pathways P,P]
+[--jobs N]`:
 seeded random (ζ, α) command sequences inside the declared ranges, a new command every 8-16 sim s,
 walked in-process through the governor (experiments/random_commands.py); DIR/random_walks.json. Exits 1
 when a walk fell, with the seeds that fell on the last line."""
@@ -36,6 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="sim s per walk (default 120)")
     p.add_argument("--feedback", choices=("ours", "paper", "off"), default="ours",
                    help="feedback variant (default ours: cpg_node's)")
+    p.add_argument("--pathways", default=None, metavar="P,P,...",
+                   help="these feedback pathways instead of --feedback's (e.g. amplitude,reset_both,heading,"
+                        "ankle: the opt-in ankle pathway on top of the default ones)")
     p.add_argument("--jobs", type=count, default=None, metavar="N",
                    help="parallel walks (default: every core)")
     p.set_defaults(func=_run)
@@ -44,8 +48,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _run(args: argparse.Namespace) -> int:
     from cpg_walker.experiments.random_commands import run_random_walks
 
+    pathways = None
+    if args.pathways is not None:
+        from cpg_walker.walker.feedback import check_pathways
+
+        pathways = check_pathways(tuple(p.strip() for p in args.pathways.split(",") if p.strip()))
     r = run_random_walks(args.seeds, args.out, args.duration, args.feedback, args.jobs,
-                         command=" ".join(["cpg-walker", *sys.argv[1:]]))
+                         command=" ".join(["cpg-walker", *sys.argv[1:]]), pathways=pathways)
     fell = [run for run in r["runs"] if run["fell"]]
     print(f"{len(r['runs'])} random walks of {args.duration:g} s: {len(fell)} fell", file=sys.stderr)
     if fell:

@@ -40,8 +40,10 @@ ARTIFACTS: tuple[Artifact, ...] = (
              ("envelope",), ("envelope.json", "envelope.md", "envelope.png"), 20.0),
     Artifact("pushes", "the largest lateral pushes recovered standing and walking, in-process", ("pushes",),
              ("pushes.json", "pushes.md"), 3.0),
-    Artifact("random_walks", "100 random command sequences of 120 s through the governor, in-process",
-             ("random-walks", "--seeds", "400-499"), ("random_walks.json",), 14.0),
+    Artifact("random_walks", "100 random command sequences of 120 s through the governor, in-process, with "
+             "the opt-in ankle pathway",
+             ("random-walks", "--seeds", "400-499", "--pathways", "amplitude,reset_both,heading,ankle"),
+             ("random_walks.json",), 14.0),
     Artifact("envelope_open_loop", "the same without feedback (the governor's open-loop table)",
              ("envelope", "--config", "envelope_open_loop.yaml"),
              ("envelope.json", "envelope.md", "envelope.png"), 3.0),

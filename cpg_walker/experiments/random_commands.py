@@ -36,10 +36,12 @@ def sequence(seed: int, duration_s: float = 120.0, min_gap_s: float = MIN_GAP_S,
     return tuple(out)
 
 
-def spec(seed: int, duration_s: float = 120.0, feedback: str = "ours") -> WalkSpec:
-    """The walk of one seed: from standing at ζ = α = 1, then the seed's sequence."""
+def spec(seed: int, duration_s: float = 120.0, feedback: str = "ours",
+         pathways: tuple[str, ...] | None = None) -> WalkSpec:
+    """The walk of one seed: from standing at ζ = α = 1, then the seed's sequence (``pathways``: these
+    feedback pathways instead of the ``feedback`` variant's)."""
     return WalkSpec(duration_after_s=duration_s, schedule=sequence(seed, duration_s), variant=feedback,
-                    label=f"seed {seed}", governed=True)
+                    pathways=pathways, label=f"seed {seed}", governed=True)
 
 
 def _one(s: WalkSpec) -> dict:
@@ -49,12 +51,14 @@ def _one(s: WalkSpec) -> dict:
 
 
 def run_random_walks(seeds: list[int], out_dir: str | Path, duration_s: float = 120.0, feedback: str = "ours",
-                     jobs: int | None = None, command: str = "cpg-walker random-walks") -> dict:
+                     jobs: int | None = None, command: str = "cpg-walker random-walks",
+                     pathways: tuple[str, ...] | None = None) -> dict:
     """Walk every seed's sequence; DIR/random_walks.json. ``falls``: how many fell."""
     from cpg_walker.experiments.provenance import provenance
 
-    runs = run_many(_one, [spec(s, duration_s, feedback) for s in seeds], jobs=jobs)
+    runs = run_many(_one, [spec(s, duration_s, feedback, pathways) for s in seeds], jobs=jobs)
     report = {"seeds": list(seeds), "duration_s": duration_s, "feedback": feedback,
+              "pathways": None if pathways is None else list(pathways),
               "falls": sum(1 for r in runs if r["fell"]), "runs": runs, **provenance(command)}
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

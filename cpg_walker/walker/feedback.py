@@ -129,6 +129,7 @@ class FeedbackConfig:
     ankle_roll_gain: float  # rad per rad of lateral tilt
     ankle_roll_rate_gain: float  # rad per rad/s of roll rate (ω_x)
     ankle_limit_rad: float  # |offset| clip, each axis
+    ankle_rate_time_constant_s: float  # low-pass on the angular velocity it uses (the sway, not the impacts)
 
     def __post_init__(self) -> None:
         if self.lateral_mode not in ("abs", "signed"):
@@ -146,6 +147,7 @@ class FeedbackConfig:
             if not (0.0 < getattr(self, name) <= 1.0):
                 raise InputError(f"{name} must be in (0, 1], got {getattr(self, name)}")
         for name in ("gain_scale", "g_limit", "tilt_time_constant_s", "heading_gain", "heading_limit_rad",
+                     "ankle_rate_time_constant_s",
                      "heading_time_constant_s", "reset_min_abs_zeta", "reset_min_alpha"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
@@ -348,6 +350,8 @@ class FeedbackController:
         self.heading_window_rad = math.inf  # anti-windup: |heading_ref - yaw| kept within this
         self._herr = LowPass(cfg.heading_time_constant_s)
         self.heading_error = 0.0  # filtered (rad)
+        self._rate = LowPass(cfg.ankle_rate_time_constant_s)
+        self.rate = np.zeros(3)  # the angular velocity the ankle pathway uses (low-passed, rad/s)
         self.touchdowns = (False, False)  # (left, right) events of the last observe
         self.resets: list[tuple[float, float]] = []  # (t, Δ rad)
 
@@ -372,6 +376,7 @@ class FeedbackController:
         self.cfg = cfg
         self.tilt.T = cfg.tilt_time_constant_s
         self._herr.T = cfg.heading_time_constant_s
+        self._rate.T = cfg.ankle_rate_time_constant_s
 
     def set_turn_rate(self, rate: float) -> None:
         rate = float(rate)
@@ -406,6 +411,7 @@ class FeedbackController:
         yaw = yaw_from_quat(q)
         self.yaw = yaw if self._t is None else self.yaw + wrap(yaw - self.yaw)
         self.gyro = np.asarray(gyro, dtype=float)
+        self.rate = self._rate.update(self.gyro, dt).copy()
         if self.heading_ref is not None:
             self.heading_ref += self.turn_rate * dt
             w = self.heading_window_rad
@@ -453,8 +459,8 @@ class FeedbackController:
         if "ankle" not in self.pathways or self._weight <= 0.0:
             return 0.0, 0.0
         c, lim = self.cfg, self.cfg.ankle_limit_rad
-        dp = c.ankle_pitch_gain * self.psi[1] + c.ankle_pitch_rate_gain * float(self.gyro[1])
-        dr = c.ankle_roll_gain * self.psi[0] + c.ankle_roll_rate_gain * float(self.gyro[0])
+        dp = c.ankle_pitch_gain * self.psi[1] + c.ankle_pitch_rate_gain * float(self.rate[1])
+        dr = c.ankle_roll_gain * self.psi[0] + c.ankle_roll_rate_gain * float(self.rate[0])
         return (self._weight * min(max(dp, -lim), lim), self._weight * min(max(dr, -lim), lim))
 
     def heading_amplitude(self) -> float:
