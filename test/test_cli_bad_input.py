@@ -280,6 +280,24 @@ def test_a_truncated_recording_in_a_bag_directory_is_one_line(tmp_path_factory, 
     assert lines[0].startswith(f"cpg-walker plot: error: {bag}: not a readable rosbag2 recording"), lines
 
 
+def test_a_recording_cut_in_its_header_is_one_line(tmp_path):
+    """Every cut in the first 64 bytes (the MCAP magic and header record: hypothesis found 8 bytes, the
+    magic alone, on which rosbags fails with a TypeError)."""
+    import io
+    from contextlib import redirect_stderr
+
+    _write_bag(tmp_path)
+    mcap = tmp_path / "recording.mcap"
+    data = mcap.read_bytes()
+    for n in range(64):
+        mcap.write_bytes(data[:n])
+        err = io.StringIO()
+        with redirect_stderr(err):
+            status = main(["plot", str(tmp_path), "--out", str(tmp_path / "plots")])
+        lines = err.getvalue().strip().splitlines()
+        assert status == 2 and len(lines) == 1 and "not a readable rosbag2 recording" in lines[0], (n, lines)
+
+
 def _write_bag(d: Path) -> None:
     """A small rosbag2 MCAP bag (std_msgs/String) into ``d`` as recording.mcap + metadata.yaml."""
     from rosbags.rosbag2 import StoragePlugin, Writer

@@ -416,12 +416,20 @@ def read_topics(path: str | Path, topics: list[str] | None = None) -> dict[str, 
     raise InputError(f"{p}: not a recording (no metadata.yaml in {d}, not a .mcap file)")
 
 
+#: Length of the MCAP file magic (b"\x89MCAP0\r\n"); a file no longer than it has no record.
+MCAP_MAGIC_BYTES = 8
+
+
 def _read_rosbag2(d: Path, topics: list[str] | None) -> dict[str, list[tuple[int, Any]]]:
     from rosbags.rosbag2 import Reader, ReaderError
     from rosbags.serde import SerdeError
 
     store = typestore()
     out: dict[str, list[tuple[int, Any]]] = {}
+    for f in d.glob("*.mcap"):  # only MCAP's magic left: rosbags fails there with a TypeError (ord(''))
+        if f.is_file() and f.stat().st_size <= MCAP_MAGIC_BYTES:
+            raise InputError(f"{d}: not a readable rosbag2 recording (truncated or corrupt: {f.name} has "
+                             f"{f.stat().st_size} bytes, no record after the MCAP magic)")
     try:
         with Reader(d) as reader:
             conns = [c for c in reader.connections if topics is None or c.topic in topics]
