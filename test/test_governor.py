@@ -140,3 +140,25 @@ def test_the_declared_alpha_range_is_the_longest_step_that_walked():
     packaged = GovernorConfig.load()
     assert packaged.alpha_limit == max(a for env in (packaged.envelope, packaged.open_loop)
                                        for pts in (env.forward, env.backward) for _, a in pts)
+
+
+def test_a_start_from_standing_ramps_to_the_envelope_and_the_walk_reports_it():
+    """From standing at a request beyond the envelope (α 1 at ζ 0.5, open loop): the start-up ramps α to
+    the envelope's α_max at once, not to the request (it overshot to 0.91 before the governor took over
+    at the blend's end and fell at 2.49 s; the raw controller falls so too); walk.json's applied_at_end
+    says what was walked and why."""
+    from cpg_walker.experiments.cpg_walk import walk
+    from cpg_walker.walker.learning import cpg_defaults, load_controller
+
+    ctrl = load_controller(cpg_defaults()["cpg_file"])[0]
+    cap = GovernorConfig.load().open_loop.alpha_max(0.5)
+    assert cap < 1.0
+    m = walk(ctrl, 12.0, zeta=0.5, alpha=1.0, transition="standing")
+    end = m["applied_at_end"]
+    assert not m["fell"], m["fall_time_s"]
+    assert end["zeta"] == pytest.approx(0.5, abs=1e-3) and end["alpha"] == pytest.approx(cap, abs=1e-3), end
+    assert end["governor"] == "limited" and "envelope" in end["reason"], end
+    raw = walk(load_controller(cpg_defaults()["cpg_file"])[0], 12.0, zeta=0.5, alpha=1.0,
+               transition="standing", governed=False)
+    assert raw["fell"] and raw["applied_at_end"] == {"zeta": 0.5, "alpha": raw["applied_at_end"]["alpha"],
+                                                     "governor": "off", "reason": ""}

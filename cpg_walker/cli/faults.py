@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--nodes", default=",".join(FAULT_ORDER), type=_nodes, metavar="A,B",
                    help=f"nodes to kill, in order (default {','.join(FAULT_ORDER)})")
     p.add_argument("--in-process", action="store_true",
-                   help="instead: the PID lost for --away sim s at 11 phases of a stride, "
+                   help="instead: the PID lost for --away sim s at 52 phases over two strides, "
                         "in-process; back by tracking the live gait vs re-entering it (fault_phases.json)")
     p.add_argument("--cpg-loss", action="store_true",
                    help="instead: cpg_node lost for good at 80 times over 6.4 strides, in-process: pid_node "

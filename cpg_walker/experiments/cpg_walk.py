@@ -70,6 +70,11 @@ def walk(ctrl: HumanoidCPG, duration: float, zeta: float | None = None, alpha: f
         "schedule": [list(s) for s in (schedule or [])],
         "touchdowns_s": {k: [round(x, 3) for x in v] for k, v in result.touchdowns.items()},
     })
+    gov = getattr(source, "governor", None)
+    m["applied_at_end"] = {"zeta": round(float(source.ctrl.zeta), 4),
+                           "alpha": round(float(source.ctrl.alpha), 4),
+                           "governor": gov.state if gov is not None else "off",
+                           "reason": gov.reason if gov is not None else ""}
     if refused:  # the scheduled values refused (walk.json's keys are otherwise those of before the governor)
         m["refused"] = refused
     if not governed:
@@ -158,7 +163,10 @@ def run_cpg_walk(out_dir: str, duration: float = 60.0, zeta: float | None = None
         from cpg_walker.experiments.render import write_filmstrip
 
         status = f"fell at {m['fall_time_s']} s" if m["fell"] else "no fall"
-        title = (f"HOAP-2, CPG N={ctrl.net.N}, zeta={zeta}, alpha={alpha}: "
+        end = m["applied_at_end"]  # what the governor walked, when it differs from the command
+        walked = (f" (walked at alpha {end['alpha']:.2g}: {end['reason']})"
+                  if not schedule and abs(end["alpha"] - alpha) > 0.005 else "")
+        title = (f"HOAP-2, CPG N={ctrl.net.N}, zeta={zeta}, alpha={alpha}{walked}: "
                  f"{m['distance_m']:.2f} m in {m['duration_s']:.1f} s, {status}")
         strip = write_filmstrip(grabber.frames, grabber.times, out / "filmstrip.png", title=title)
         m["filmstrip"] = str(strip)

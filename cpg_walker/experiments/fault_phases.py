@@ -1,11 +1,11 @@
 """The controller lost and back, in-process, at phases over a whole stride (``cpg-walker faults
 --in-process``): what the graph's pid_node fault does, without DDS or wall-clock noise.
 
-The walking robot (the learned CPG with feedback, zeta 1, the in-process loop of walker/loop.py) loses
-its PID at ``t_kill``: after ``hold_after`` s the servos hold the posture measured then (sim_node's
-``ServoHold``: the PID law towards that posture, velocity 0) while the CPG goes on stepping; ``away`` s
-later a new PID takes over and blends from the measured posture to the gait's targets over
-``resume_blend`` (pid_node's join blend). Two ways back are compared:
+The walking robot (the learned CPG with feedback and the governor, as cpg_node, zeta 1, the in-process
+loop of walker/loop.py) loses its PID at ``t_kill``: after ``hold_after`` s the servos hold the posture
+measured then (sim_node's ``ServoHold``: the PID law towards that posture, velocity 0) while the CPG goes
+on stepping; ``away`` s later a new PID takes over and blends from the measured posture to the gait's
+targets over ``resume_blend`` (pid_node's join blend). Two ways back are compared:
 
 * ``live``: track the gait where the CPG has got to (what pid_node alone does);
 * ``reenter``: the gait re-enters from the standing crouch at that moment (``CPGGaitSource.reenter``:
@@ -20,8 +20,9 @@ import numpy as np
 
 from cpg_walker.robot.joints import JOINT_NAMES
 
-#: Kill times: 11 over a stride (1.26 s at zeta 1) once the CPG walks alone (from 6.6 s).
-KILL_TIMES = tuple(round(8.0 + 0.25 * k, 2) for k in range(11))
+#: Kill times: 52, every 0.05 s over two strides (1.26 s at zeta 1) once the CPG walks alone (from 6.6 s);
+#: the falls of a re-entry are scattered over phases 0.05 s apart (the 11 of a 0.25 s grid missed them).
+KILL_TIMES = tuple(round(8.0 + 0.05 * k, 2) for k in range(52))
 MODES = ("live", "reenter")
 
 
@@ -78,11 +79,13 @@ def run_one(t_kill: float, away: float, mode: str, tail: float = 10.0, window: f
     from cpg_walker.robot.pid import PidLaw
     from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
     from cpg_walker.walker.gait_source import FeedbackGaitSource
+    from cpg_walker.walker.governor import GovernorConfig
     from cpg_walker.walker.loop import run_replay
 
     hold_after = float(ros_parameters("sim.yaml", "sim")["servo_hold_after"])
     resume_blend = float(ros_parameters("pid.yaml", "pid")["resume_blend"])
-    source = FeedbackGaitSource(_controller(), FeedbackController(FeedbackConfig.load()))
+    source = FeedbackGaitSource(_controller(), FeedbackController(FeedbackConfig.load()),
+                                governor=GovernorConfig.load())  # as cpg_node
     sim = Hoap2Sim()
     sim.reset()
     loss = ControllerLoss(sim, source, t_kill, away, mode, hold_after, resume_blend)

@@ -90,15 +90,17 @@ class CPGGaitSource:
         # CPG phase at the hand-over: the recording time handover maps to this time within the cycle
         phase_s = (self.handover - cyc_start) % ctrl.period if transition == "recording" else 0.0
         ctrl.reset_phase(phase_s)
+        self.governor_config = governor
         if transition == "standing":
             ctrl.set_modulation_state(zeta, 0.0)
-            ctrl.set_alpha(alpha)
+            ctrl.set_alpha(self._start_alpha(zeta, alpha))
+            if self._start_alpha(zeta, alpha) != alpha:  # the rest through the governor at the takeover
+                self.schedule = sorted([*self.schedule, (self.handover + self.blend, zeta, alpha)])
         else:  # take over the recording at its own pace; the requested ζ, α are commanded after the blend
             ctrl.set_modulation_state(1.0, 1.0)
             if (zeta, alpha) != (1.0, 1.0):
                 self.schedule = sorted([*self.schedule, (self.handover + self.blend, zeta, alpha)])
         self._t_net = self.handover  # sim time the network state corresponds to
-        self.governor_config = governor
         self.governor: Governor | None = None  # made at the takeover, from the commands then
         self._cache = None
         self.feedback_g: np.ndarray | None = None  # eqs 16–17 g_k applied while stepping (feedback.py)
@@ -116,11 +118,13 @@ class CPGGaitSource:
         self.schedule = []
         self.ctrl.reset_phase(0.0)
         self.ctrl.set_modulation_state(zeta, 0.0)
-        self.ctrl.set_alpha(alpha)
+        first = self._start_alpha(zeta, alpha)
+        self.ctrl.set_alpha(first)
         self._t_net = self.handover
         self.feedback_g = None
         if self.governor is not None:
-            self.governor.reset(zeta, alpha)
+            self.governor.reset(zeta, first)
+            self.governor.request(zeta, alpha)
 
     @property
     def t_net(self) -> float:
@@ -150,8 +154,7 @@ class CPGGaitSource:
         cfg = self.governor_config
         if self.governor is None and cfg is not None and at is not None and self._t_net < self.takeover_s \
                 and at >= self.takeover_s - 1e-9:
-            env = cfg.envelope if self._closes_loop() else (cfg.open_loop or cfg.envelope)
-            first = min(alpha, env.alpha_max(zeta))
+            first = self._start_alpha(zeta, alpha)
             self.ctrl.set_zeta(zeta)
             self.ctrl.set_alpha(first)
             self.governor = Governor(cfg, zeta, first)
@@ -163,6 +166,16 @@ class CPGGaitSource:
         else:
             self.ctrl.set_zeta(zeta)
             self.ctrl.set_alpha(alpha)
+
+    def _start_alpha(self, zeta: float, alpha: float) -> float:
+        """The α a start-up (from standing, the recording's takeover, a re-entry) ramps to at once: capped
+        to the envelope of the pathways that will be closed then (the governor's, none: as requested), so
+        the ramp never overshoots what walks before the governor takes over."""
+        cfg = self.governor_config
+        if cfg is None:
+            return alpha
+        env = cfg.envelope if self._closes_loop() else (cfg.open_loop or cfg.envelope)
+        return min(alpha, env.alpha_max(zeta))
 
     def _open_loop(self) -> bool:
         """No feedback pathways closed (the governor's open-loop envelope)."""
@@ -295,9 +308,9 @@ class FeedbackGaitSource(CPGGaitSource):
     keep_traces = True
 
     def __init__(self, ctrl: HumanoidCPG, feedback: FeedbackController, **kwargs):
+        self.fb = feedback  # first: the start-up's α cap depends on the pathways it will close
         super().__init__(ctrl, **kwargs)
         self._next_trace = -math.inf
-        self.fb = feedback
         self.active_from = self.handover + self.blend
         self.g_trace: list[tuple[float, float, float, float, float]] = []  # t, roll, pitch, g_Ankle2, g_Knee
         self.touchdown_phases: list[float] = []  # right Hip2 oscillator 0 phase at right touchdowns
