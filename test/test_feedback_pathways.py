@@ -367,3 +367,31 @@ def test_forecast_includes_the_hip_yaw_oscillation(learned):
         exact.append(src.targets(t)[0][yaw_idx])
     assert np.abs(q[:, yaw_idx] - np.array(exact)).max() < 2e-3
     assert np.abs(np.array(exact)).max() > 0.01
+
+
+def test_the_ankle_pathway_acts_only_on_fresh_samples():
+    """ankle: offsets from the tilt and rate (clipped); samples older than ankle_max_sample_age_s fade it
+    out over ankle_fade_s, fresh ones back in; age 0 (in-process, lockstep) never fades it."""
+    cfg = FeedbackConfig.load()
+    fb = FeedbackController(cfg, ("ankle",))
+    lean = np.array([math.cos(0.1), 0.0, math.sin(0.1), 0.0])  # 0.2 rad forward pitch (w, x, y, z)
+    dt = 0.002
+
+    def tick(k: int, age: float) -> tuple[float, float]:
+        fb.observe(k * dt, lean, np.array([0.3, 0.1, 0.0]), (30.0, 30.0), age)
+        return fb.ankle_offsets()
+
+    fresh = [tick(k, 0.0) for k in range(50)][-1]
+    pitch = cfg.ankle_pitch_gain * fb.psi[1] + cfg.ankle_pitch_rate_gain * 0.1
+    roll = cfg.ankle_roll_gain * fb.psi[0] + cfg.ankle_roll_rate_gain * 0.3
+    assert fresh == pytest.approx((np.clip(pitch, -cfg.ankle_limit_rad, cfg.ankle_limit_rad),
+                                   np.clip(roll, -cfg.ankle_limit_rad, cfg.ankle_limit_rad)))
+    assert fb.ankle_fresh == 1.0 and abs(fresh[0]) > 0.01
+    stale = cfg.ankle_max_sample_age_s * 2
+    n = round(cfg.ankle_fade_s / dt)
+    half = [tick(50 + k, stale) for k in range(n // 2)][-1]
+    assert 0.0 < fb.ankle_fresh < 1.0 and abs(half[0]) < abs(fresh[0])
+    gone = [tick(50 + n // 2 + k, stale) for k in range(n)][-1]
+    assert fb.ankle_fresh == 0.0 and gone == (0.0, 0.0)
+    back = [tick(50 + 2 * n + k, cfg.ankle_max_sample_age_s) for k in range(n + 1)][-1]
+    assert fb.ankle_fresh == 1.0 and back == pytest.approx(fresh)

@@ -185,6 +185,7 @@ class CPGDriver:
         self.monitor_due: tuple[int, np.ndarray, dict[str, str]] | None = None
         self.feedback_state = self.fade.state(self.feedback_on)
         self.sensor_age_s: float | None = None
+        self.sample_ages = {"ticks": 0, "max_s": 0.0, "older_than_ankle_max": 0}
         self._cmd_logged: tuple | None = None
         self.cmd_turn = "ok"  # ok | why angular.z cannot turn the robot
         self._start(feedback)
@@ -375,10 +376,15 @@ class CPGDriver:
         dt = 0.0 if self.last_tick_ns is None else (t_ns - self.last_tick_ns) / 1e9
         sample = self._sample(t_ns)
         self.sensor_age_s = None if sample is None else max(0, t_ns - sample[0]) / 1e9
+        if self.sensor_age_s is not None:  # how old the samples the pathways acted on were (exit stats)
+            ages = self.sample_ages
+            ages["ticks"] += 1
+            ages["max_s"] = max(ages["max_s"], self.sensor_age_s)
+            ages["older_than_ankle_max"] += self.sensor_age_s > self.source.fb.cfg.ankle_max_sample_age_s
         weight = self.fade.update(dt, self.feedback_on, self.sensor_age_s)
         self.source.fb.weight = weight
         if sample is not None and (weight > 0 or self.feedback_on):
-            self.source.observe(t_ns / 1e9, sample[1], sample[2], sample[3])
+            self.source.observe(t_ns / 1e9, sample[1], sample[2], sample[3], self.sensor_age_s)
         else:
             self.source.feedback_g = None  # faded out and off: the open-loop CPG
         state = self.fade.state(self.feedback_on)
@@ -612,7 +618,9 @@ class CPGDriver:
                     "pathways": list(fb.pathways), "phase_resets": len(fb.resets),
                     "phase_reset_times_s": [round(t, 3) for t, _ in fb.resets[:100]],
                     "dropped": c["sensors_dropped"], "wait_timeouts": c["sensor_wait_timeouts"],
-                    "clock_dropped": c["clock_dropped"], "targets_withheld": c["targets_withheld"]}
+                    "clock_dropped": c["clock_dropped"], "targets_withheld": c["targets_withheld"],
+                    "sample_age": {**self.sample_ages, "max_s": round(self.sample_ages["max_s"], 4)},
+                    "ankle_fresh": fb.ankle_fresh}
         return {**self.activity.summary(), "overruns": timing["overruns"], "tick": timing,
                 "feedback": feedback, "cmd_vel": self.cmd_vel_counts, "rejoined_at_s": self.rejoined_at_s,
                 "reentries": self.reentries, "clock_resets": self.clock_resets}

@@ -319,9 +319,10 @@ class FeedbackGaitSource(CPGGaitSource):
         self._yaw_idx = np.array([JOINT_NAMES.index(j) for j in HIP_YAW])
         self._ankle = (0.0, 0.0)  # the ankle pathway's (pitch, roll) offsets
 
-    def observe(self, t: float, quat_wxyz: np.ndarray, gyro: np.ndarray, loads: tuple[float, float]) -> None:
+    def observe(self, t: float, quat_wxyz: np.ndarray, gyro: np.ndarray, loads: tuple[float, float],
+                age_s: float = 0.0) -> None:
         fb = self.fb
-        fb.observe(t, quat_wxyz, gyro, loads)
+        fb.observe(t, quat_wxyz, gyro, loads, age_s)
         if fb.heading_ref is None and (t >= self.active_from or fb.cfg.heading_reference == "start"):
             fb.capture_heading()
         if t < self.active_from:
