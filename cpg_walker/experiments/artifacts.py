@@ -44,6 +44,8 @@ ARTIFACTS: tuple[Artifact, ...] = (
              "the opt-in ankle pathway",
              ("random-walks", "--seeds", "400-499", "--pathways", "amplitude,reset_both,heading,ankle"),
              ("random_walks.json",), 14.0),
+    Artifact("random_walks_default", "50 random command sequences of 120 s with cpg_node's default pathways "
+             "(no ankle), in-process", ("random-walks", "--seeds", "500-549"), ("random_walks.json",), 7.0),
     Artifact("envelope_open_loop", "the same without feedback (the governor's open-loop table)",
              ("envelope", "--config", "envelope_open_loop.yaml"),
              ("envelope.json", "envelope.md", "envelope.png"), 3.0),
