@@ -108,8 +108,9 @@ def test_counts_follow_the_sim_time_and_the_control_period(walk):
     controllers' targets and torques of every tick from the first recorded one: like ``ros2 bag record``,
     the recorder subscribes to a topic once it has seen its publisher, so the very first target and torque
     (sent as soon as the sim's first state arrives) can go out before the recorder's subscription is
-    matched; the sim's state topics are complete from t = 0: the sim holds its first state until the
-    recorder has subscribed to them (sim_node's wait_for_subscriber)."""
+    matched (the sim then holds its second state until the recorder has subscribed to them); the sim's
+    state topics are complete from t = 0: the sim holds its first state until the recorder has
+    subscribed to them (sim_node's wait_for_subscriber)."""
     period, odom_period = SIM["control_period"], SIM["odom_period"]
     ticks = [_ns(k * period) for k in range(round(DURATION_S / period))]
     d = walk.data

@@ -31,7 +31,7 @@ from cpg_walker.nodes.messages import (
     stamp,
     stamp_ns,
 )
-from cpg_walker.nodes.params import by_name, declare, declare_params, descriptor, explain_refusals
+from cpg_walker.nodes.params import by_name, declare, declare_params, descriptor, name_refusals
 from cpg_walker.nodes.runtime import (
     HotPath,
     Throttle,
@@ -108,8 +108,8 @@ class CPGNode(Node):
             governor=governor)
         self.get_logger().info(f"CPG warmed up in {self.driver.warm_up():.3f} s")
         self.add_on_set_parameters_callback(self._on_set)
-        explain_refusals(self, lambda name, value: command_error(name, value, governor)
-                         if name in ("zeta", "alpha") else None)  # why a zeta/alpha is out of range
+        name_refusals(self, lambda name, value: command_error(name, value, governor)
+                      if name in ("zeta", "alpha") else None)  # why a zeta/alpha is out of range
         self.builder = JointStateBuilder(self.driver.source.names, fields=("position", "velocity"))
         self.traj_builder: tuple[int, JointTrajectoryBuilder] | None = None  # (offsets' id, builder)
         self.state_msg = Float64MultiArray(layout=state_layout(ctrl.names, ctrl.net.N))

@@ -270,11 +270,16 @@ def declare(node: Node, name: str, descriptor: ParameterDescriptor) -> object:
                          f"--ros-args --params-file {params_file(node.get_name())}") from None
 
 
-def name_refusals(node: Node) -> None:
-    """Make every refused parameter change say which parameter it refused: rclpy's own checks answer a
-    wrong type ("Wrong parameter type, expected ...") or an undeclare without the name, so a client setting
-    several at once could not tell which. Wraps the node's ``set_parameters_atomically`` (what the
-    set_parameters services call), once; reasons that already name the parameter are kept as they are."""
+def name_refusals(node: Node, explain=None) -> None:
+    """Make every refused parameter change say why, naming the parameter: rclpy's own checks answer a wrong
+    type ("Wrong parameter type, expected ...") or an undeclare without the name, and a descriptor's range
+    only "out of range", so a client setting several at once could not tell which or why. ``explain(name,
+    value)`` (str, or None: nothing to add) gives the reason where it says more than rclpy's check; a
+    reason that does not name a parameter gets the names in front. Wraps the node's
+    ``set_parameters_atomically`` (what the set_parameters services call) once; a later call only sets
+    ``explain``."""
+    if explain is not None:
+        node._refusal_explain = explain
     if getattr(node, "_refusals_named", False):
         return
     node._refusals_named = True
@@ -283,26 +288,13 @@ def name_refusals(node: Node) -> None:
     def set_parameters_atomically(parameters):
         result = plain(parameters)
         if not result.successful:
+            say = getattr(node, "_refusal_explain", None)
+            why = [r for p in parameters if (r := say(p.name, p.value))] if say else []
+            if why:
+                result.reason = "; ".join(why)
             names = [p.name for p in parameters if p.name not in result.reason]
             if len(names) == len(parameters):  # none named yet
                 result.reason = f"{', '.join(names)}: {result.reason or 'refused'}"
-        return result
-
-    node.set_parameters_atomically = set_parameters_atomically
-
-
-def explain_refusals(node: Node, explain) -> None:
-    """A refused change's reason from ``explain(name, value)`` (str, or None: nothing to add) where it says
-    more than rclpy's own check (a descriptor's range says only "out of range"): wraps the node's
-    ``set_parameters_atomically`` as ``name_refusals`` does."""
-    plain = node.set_parameters_atomically
-
-    def set_parameters_atomically(parameters):
-        result = plain(parameters)
-        if not result.successful:
-            why = [r for p in parameters if (r := explain(p.name, p.value))]
-            if why:
-                result.reason = "; ".join(why)
         return result
 
     node.set_parameters_atomically = set_parameters_atomically

@@ -414,22 +414,27 @@ class SimNode(Node):
         """The topics of the state published every period (/clock, /joint_states, /imu, /foot_load/*)."""
         return [pub.topic_name for pub in (self.pub_clock, self.pub_js, self.pub_imu, *self.pub_feet)]
 
-    def _wait_for_subscriber(self) -> bool:
-        """Before the first state: until every node named ``wait_for_subscriber`` (at least one) has a
-        subscription on every state topic (a recorder that finds topics by scanning then has the run from
-        its first period)."""
+    def command_topics(self) -> list[str]:
+        """The controllers' topics of every period that have a publisher (/joint_targets, /joint_torques)."""
+        return [t for t in (ifc.JOINT_TARGETS, ifc.JOINT_TORQUES) if self.count_publishers(t) > 0]
+
+    def _wait_for_subscriber(self, topics: list[str]) -> bool:
+        """Until every node named ``wait_for_subscriber`` (at least one) has a subscription on each of
+        ``topics``: before the first state on the state topics, and once the controllers have answered it
+        (their publishers exist now) on theirs, so a recorder that finds topics by scanning has the run
+        from its first period (a cpg_node started late under load was found 0.7 sim s in, in lockstep)."""
         name = self.wait_subscriber
         since = None  # wall time from which every node of that name seen has subscribed
         while rclpy.ok():
             nodes = max(1, sum(n == name for n, _ in self.get_node_names_and_namespaces()))
-            missing = [t for t in self.state_topics()  # every node of that name (e.g. a second recorder)
+            missing = [t for t in topics  # every node of that name (e.g. a second recorder)
                        if sum(i.node_name == name for i in self.get_subscriptions_info_by_topic(t)) < nodes]
             now = time.monotonic()
             since = None if missing else (since or now)
             # held for SUBSCRIBER_SETTLE_S: a second node of that name still being discovered (a recorder
             # started just before) is counted too, instead of the run starting without it
             if since is not None and now - since >= SUBSCRIBER_SETTLE_S:
-                self.get_logger().info(f"{name} subscribes to every state topic: starting")
+                self.get_logger().info(f"{name} subscribes to {', '.join(topics)}: going on")
                 return True
             self.get_logger().info(f"waiting for {name} to subscribe to {', '.join(missing)}",
                                    throttle_duration_sec=2.0)
@@ -439,7 +444,7 @@ class SimNode(Node):
 
     def run(self) -> None:
         lockstep, realtime = self.pacing == ifc.LOCKSTEP, self.pacing == "realtime"
-        if self.wait_subscriber and not self._wait_for_subscriber():
+        if self.wait_subscriber and not self._wait_for_subscriber(self.state_topics()):
             return
         self.get_logger().info(
             f"pacing={self.pacing} control_period={self.period_ns / 1e9} s physics={self.sim.dt} s "
@@ -451,6 +456,8 @@ class SimNode(Node):
             self.publish_state(t_ns)
             waits = lockstep or (self.k == 0 and self.wait_first)
             if waits and not self._wait_for_torque(t_ns):
+                break
+            if self.k == 0 and self.wait_subscriber and not self._wait_for_subscriber(self.command_topics()):
                 break
             if self.k == 0:  # the run's clocks start now, after any start-up wait for the controller
                 self.cpu_start = time.process_time()

@@ -34,7 +34,8 @@ SIM = (
     boolean("wait_for_controller", "hold the first period until a torque arrives (every pacing)",
             read_only=True),
     string("wait_for_subscriber", "hold the first state until this node (e.g. recorder) subscribes to every "
-           "state topic ('' = do not wait)", read_only=True),
+           "state topic, and the second until it subscribes to the controllers' targets and torques ('' = do "
+           "not wait)", read_only=True),
     double("lockstep_resend", "wall s without an answer before the state is re-sent", 0.001, 10.0),
     double("late_torque_wait", "realtime: wall s past a period's deadline to wait for a torque at most "
            "max_torque_age old before going on with the held one (0 = never wait)", 0.0, 10.0),

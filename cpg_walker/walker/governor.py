@@ -26,6 +26,7 @@ standing) and
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -95,9 +96,16 @@ class GovernorConfig:
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> GovernorConfig:
+        """config/governor.yaml (read once per process: the config is immutable), or the file at ``path``
+        (read every time); a broken file: an InputError naming the file and the problem."""
+        if not path:
+            return _packaged()
+        return cls._read(Path(path))
+
+    @classmethod
+    def _read(cls, p: Path) -> GovernorConfig:
         import yaml
 
-        p = Path(path) if path else config_path("governor.yaml")
         try:
             d = yaml.safe_load(p.read_text(encoding="utf-8"))
         except (OSError, yaml.YAMLError) as exc:
@@ -130,6 +138,11 @@ class GovernorConfig:
         if any(not (math.isfinite(v) and v > 0) for v in rates.values()):
             raise InputError(f"{p}: rates and tolerances must be finite and > 0, got {rates}")
         return cls(closed, open_loop, **rates)
+
+
+@functools.cache
+def _packaged() -> GovernorConfig:
+    return GovernorConfig._read(config_path("governor.yaml"))
 
 
 def command_range(name: str, governor: GovernorConfig | None) -> tuple[float, float]:
