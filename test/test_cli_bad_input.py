@@ -331,6 +331,16 @@ def test_a_bad_ros_domain_id_is_one_line(capsys, place, monkeypatch, data, value
     one_line_error(capsys, _fill(argv, place), "ROS_DOMAIN_ID")
 
 
+@pytest.mark.parametrize("value", ["0\x1c", "\x1f0", "0\x1d", "\x1e5", "\u0663", "\U0001d7ce", "-1", "233",
+                                   "+5"])
+@pytest.mark.parametrize("argv", [["graph"], ["demo", "--out", "{out}"], ["topic", "list"]])
+def test_a_domain_only_python_reads_is_refused(capsys, place, monkeypatch, argv, value):
+    """What str.strip() + int() take and rcl does not (file/group separators, non-ASCII digits, a sign):
+    one line, exit 2, no graph started (hypothesis found "0\x1c" running a whole graph in domain 0)."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", value)
+    one_line_error(capsys, _fill(argv, place), "ROS_DOMAIN_ID")
+
+
 @pytest.mark.parametrize("argv, needle", [
     (["walk", "--out", "{out}", "--schedule", "5,nan,1"], "zeta and alpha must be finite"),
     (["walk", "--out", "{out}", "--schedule", "x"], "--schedule"),

@@ -51,16 +51,17 @@ def check_domain_id(domain_id: int, origin: str = "the DDS domain") -> int:
 
 
 def env_domain_id() -> int | None:
-    """ROS_DOMAIN_ID as a domain in 0..232; None when unset or empty; InputError when anything else."""
-    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    """ROS_DOMAIN_ID as a domain in 0..232; None when unset or empty; InputError when anything else. Only
+    ASCII digits, with ASCII white space around them, as rcl reads it: str.strip() and int() also take
+    "\x1c0" or Unicode digits, which a node started with that environment would refuse (the fuzz test
+    found "0\x1c" starting a whole graph in domain 0)."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip(" \t\n\r\v\f")
     if not text:
         return None
-    try:
-        value = int(text)
-    except ValueError:
+    if not (text.isascii() and text.isdigit()):
         raise InputError(f"ROS_DOMAIN_ID must be an integer in {DOMAIN_RANGE[0]}..{DOMAIN_RANGE[1]}, got "
-                         f"{text!r}") from None
-    return check_domain_id(value, "ROS_DOMAIN_ID")
+                         f"{text!r}")
+    return check_domain_id(int(text), "ROS_DOMAIN_ID")
 
 
 def random_domain_id() -> int:
