@@ -1,8 +1,8 @@
-"""Pushes (issue 24), in-process through the governor, with the opt-in ankle pathway on top of the default
-feedback pathways: walking at ζ 1 recovers the target 1.6 N·s lateral push to either side and standing
-(α 0) 2.75 N·s. Measured (in-process, the bisection of experiments/pushes.py, 0.06 N·s resolution): with
-the ankle pathway walking 1.75 left / 2.00 right, standing 3.00 / 2.81; with the default pathways alone
-(`cpg-walker pushes`, docs/results/pushes/) walking 1.19 / 1.44, standing 3.13 / 2.94."""
+"""Pushes (issue 24), in-process through the governor, the default feedback pathways (with the ankle
+strategy): walking at ζ 1 recovers the target 1.6 N·s lateral push to either side and standing (α 0)
+2.75 N·s. Measured (`cpg-walker pushes`, docs/results/pushes/: the bisection of experiments/pushes.py,
+0.06 N·s resolution): walking 1.75 left / 2.00 right, standing 3.00 / 2.81; without the ankle pathway
+walking 1.19 / 1.44, standing 3.13 / 2.94."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import pytest
 
 from cpg_walker.experiments.pushes import AFTER_S, AT_S, DURATION_S
 from cpg_walker.experiments.walk_runs import Push, WalkSpec, run_many, run_walk
-from cpg_walker.walker.feedback import default_pathways
 
 pytestmark = pytest.mark.slow
 
@@ -22,7 +21,6 @@ CASES = ((1.0, 1.6), (0.0, 2.75))
 def _walk(args: tuple[float, float, float]) -> dict:
     alpha, impulse, direction = args
     r = run_walk(WalkSpec(zeta=1.0, alpha=alpha, duration_after_s=AT_S + AFTER_S, governed=True,
-                          pathways=(*default_pathways(), "ankle"),
                           push=Push(AT_S, impulse, DURATION_S, direction)))
     return {"alpha": alpha, "impulse": impulse, "direction": direction, "fell": r["fell"],
             "fall_time_s": r["fall_time_s"]}

@@ -38,8 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--feedback", choices=("ours", "paper", "off"), default="ours",
                    help="feedback variant (default ours: cpg_node's)")
     p.add_argument("--pathways", default=None, metavar="P,P,...",
-                   help="these feedback pathways instead of --feedback's (e.g. amplitude,reset_both,heading,"
-                        "ankle: the opt-in ankle pathway on top of the default ones)")
+                   help="these feedback pathways instead of --feedback's (e.g. amplitude,reset_both,heading: "
+                        "the default ones without the ankle strategy)")
     p.add_argument("--jobs", type=count, default=None, metavar="N",
                    help="parallel walks (default: every core)")
     p.set_defaults(func=_run)

@@ -40,12 +40,14 @@ ARTIFACTS: tuple[Artifact, ...] = (
              ("envelope",), ("envelope.json", "envelope.md", "envelope.png"), 20.0),
     Artifact("pushes", "the largest lateral pushes recovered standing and walking, in-process", ("pushes",),
              ("pushes.json", "pushes.md"), 3.0),
-    Artifact("random_walks", "100 random command sequences of 120 s through the governor, in-process, with "
-             "the opt-in ankle pathway",
+    Artifact("random_walks", "100 random command sequences of 120 s through the governor, in-process",
              ("random-walks", "--seeds", "400-499", "--pathways", "amplitude,reset_both,heading,ankle"),
              ("random_walks.json",), 14.0),
-    Artifact("random_walks_default", "50 random command sequences of 120 s with cpg_node's default pathways "
-             "(no ankle), in-process", ("random-walks", "--seeds", "500-549"), ("random_walks.json",), 7.0),
+    Artifact("random_walks_default", "50 more random command sequences of 120 s with cpg_node's default "
+             "pathways, in-process", ("random-walks", "--seeds", "500-549"), ("random_walks.json",), 7.0),
+    Artifact("random_walks_no_ankle", "the same 50 without the ankle strategy (the defaults before it)",
+             ("random-walks", "--seeds", "500-549", "--pathways", "amplitude,reset_both,heading"),
+             ("random_walks.json",), 7.0),
     Artifact("envelope_open_loop", "the same without feedback (the governor's open-loop table)",
              ("envelope", "--config", "envelope_open_loop.yaml"),
              ("envelope.json", "envelope.md", "envelope.png"), 3.0),
