@@ -48,6 +48,8 @@ ARTIFACTS: tuple[Artifact, ...] = (
     Artifact("random_walks_no_ankle", "the same 50 without the ankle strategy (the defaults before it)",
              ("random-walks", "--seeds", "500-549", "--pathways", "amplitude,reset_both,heading"),
              ("random_walks.json",), 7.0),
+    Artifact("transitions", "every change between six walking states at 8 stride phases, in-process",
+             ("transitions", "--phases", "8"), ("transitions.json", "transitions.png"), 15.0),
     Artifact("envelope_open_loop", "the same without feedback (the governor's open-loop table)",
              ("envelope", "--config", "envelope_open_loop.yaml"),
              ("envelope.json", "envelope.md", "envelope.png"), 3.0),

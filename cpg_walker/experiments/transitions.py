@@ -48,10 +48,13 @@ def _run(item: tuple[dict, WalkSpec]) -> dict:
 
 
 def run_transitions(out_dir: str | Path, states=STATES, phases: int = 4, jobs: int | None = None,
-                    times: tuple[float, float, float] = (FROM_S, TO_S, AFTER_S)) -> dict:
-    """Walk the map; write DIR/transitions.json and transitions.png; return the report."""
+                    times: tuple[float, float, float] = (FROM_S, TO_S, AFTER_S), command: str = "") -> dict:
+    """Walk the map; write DIR/transitions.json and transitions.png; return the report (``command``: the
+    command line, recorded with the provenance)."""
+    from cpg_walker.experiments.provenance import provenance
     from cpg_walker.experiments.walk_runs import _controller
 
+    prov = provenance(command) if command else None
     period = _controller().period
     runs = run_many(_run, specs(states, phases, period, times), jobs=jobs)
     n = len(states)
@@ -66,6 +69,8 @@ def run_transitions(out_dir: str | Path, states=STATES, phases: int = 4, jobs: i
               "survived_fraction": [[None if np.isnan(x) else round(float(x), 3) for x in row]
                                     for row in matrix],
               "falls": sum(r["fell"] for r in runs)}
+    if prov:
+        report["provenance"] = prov
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "transitions.json").write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")

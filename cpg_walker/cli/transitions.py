@@ -1,0 +1,40 @@
+"""`cpg-walker transitions --out DIR [--phases N] [--jobs N]`: the transition map alone (what `cpg-walker
+sweep` also writes): every ordered pair of config/sweep.yaml's ``transitions.states`` changed at N stride
+phases through the governor, in-process (experiments/transitions.py); DIR/transitions.json and
+transitions.png. Falls are data: exit status 0."""
+
+from __future__ import annotations
+
+import argparse
+
+from cpg_walker.cli.checks import count, out_dir
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("transitions", help="which changes between walking states survive at every stride "
+                                           "phase; JSON + PNG")
+    p.add_argument("--out", required=True, type=out_dir, help="output directory")
+    p.add_argument("--phases", type=count, default=None, metavar="N",
+                   help="stride phases per change (default: config/sweep.yaml's transitions.phases)")
+    p.add_argument("--jobs", type=count, default=None, metavar="N",
+                   help="parallel walks (default: every core)")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    import sys
+
+    from cpg_walker.experiments.sweep import load_config
+    from cpg_walker.experiments.transitions import run_transitions
+
+    t = load_config()["transitions"]
+    states = tuple(tuple(float(x) for x in s) for s in t["states"])
+    times = tuple(float(t[k]) for k in ("from_s", "to_s", "after_s"))
+    r = run_transitions(args.out, states, args.phases or int(t["phases"]), args.jobs, times,
+                        command=" ".join(["cpg-walker", *sys.argv[1:]]))
+    for run in r["runs"]:
+        if run["fell"]:
+            print(f"fell: {run['from']} -> {run['to']} at phase {run['phase']} ({run['at_s']} s): "
+                  f"at {run['fall_time_s']} s", file=sys.stderr)
+    print(f"{len(r['runs'])} transitions: {r['falls']} fell; {args.out}/transitions.png", file=sys.stderr)
+    return 0
