@@ -176,3 +176,25 @@ def _setup():
                     cmd_vel_limits=CmdVelLimits.load(), horizon_s=1.0, horizon_stop_s=3.0,
                     horizon_step_ns=40 * MS, monitor_period_ns=100 * MS)
     return ctrl, settings
+
+
+def test_the_ankle_pathway_acts_in_lockstep_or_when_allowed_in_realtime() -> None:
+    """Outside lockstep the ankle pathway stays out unless ``ankle_in_realtime`` (config/cpg.yaml: its rate
+    gains fell on an overloaded realtime machine); the other pathways act either way."""
+    quat, gyro = np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.4, 0.3, 0.0])  # rolling and pitching
+    offsets = {}
+    cases = (("realtime", {}), ("allowed", {"ankle_in_realtime": True}), ("lockstep", {"lockstep": True}))
+    for name, extra in cases:
+        ctrl, settings = _setup()
+        settings["feedback"] = FeedbackController(FeedbackConfig.load(), (*default_pathways(), "ankle"))
+        d, _ = _make(ctrl, {**settings, "feedback_on": True, "horizon_s": 0.0, **extra})
+        for t in range(0, 7_000 * MS, PERIOD):
+            d.sample(0, t, (quat, gyro))
+            d.sample(1, t, 20.0)
+            d.sample(2, t, 20.0)
+            d.clock(t)
+        offsets[name] = d.source.fb.ankle_offsets()
+        assert d.summary()["feedback"]["ankle_allowed"] is (name != "realtime")
+        assert d.fade.weight == 1.0  # the pathways closed
+    assert offsets["realtime"] == (0.0, 0.0)
+    assert all(abs(v) > 0.01 for v in (*offsets["allowed"], *offsets["lockstep"])), offsets

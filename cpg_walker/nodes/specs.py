@@ -176,6 +176,9 @@ CPG = (
            read_only=True),
     boolean("lockstep", "wait for the sensor samples stamped like each /clock tick (deterministic; with the "
             "sim's lockstep pacing)", read_only=True),
+    boolean("ankle_in_realtime", "the ankle feedback pathway acts outside lockstep too (its rate gains need "
+            "a loop that waits for its samples: on an overloaded realtime machine it fell, docs/governor.md)",
+            read_only=True),
     boolean("feedback", "close the sensory feedback pathways (false: the open-loop CPG)"),
     double("sensor_timeout", "sim s without a newer /imu or /foot_load sample before feedback fades out",
            1e-3, 10.0),

@@ -142,15 +142,16 @@ class CPGDriver:
     time, with the feedback pathways, the /cmd_vel follower and the horizon (module docstring). ``zeta``
     and ``alpha``: the commands to walk at (``command`` changes them: the one entry point for the
     parameters; /cmd_vel's output goes through the same gait source). ``horizon_s`` 0: no horizon.
-    ``wall``: the monotonic wall clock of the lockstep sensor wait."""
+    ``wall``: the monotonic wall clock of the lockstep sensor wait. The ankle pathway acts only in
+    ``lockstep`` or with ``ankle_in_realtime`` (its rate gains need a loop that waits for its samples)."""
 
     def __init__(self, ctrl: HumanoidCPG, out: DriverOutput, *, feedback: FeedbackController,
                  feedback_on: bool, fade: FeedbackFade, zeta: float, alpha: float, speed_map: SpeedMap,
                  cmd_vel_limits: CmdVelLimits, follow_cmd_vel: bool = True, lookahead: bool = True,
                  monitor_period_ns: int = 100_000_000, horizon_s: float = 0.0, horizon_stop_s: float = 0.0,
                  horizon_step_ns: int = 40_000_000, rejoin_settle_ns: int = 0, lockstep: bool = False,
-                 sensor_wait_s: float = 0.4, governor: GovernorConfig | None = None,
-                 wall: Callable[[], float] = time.monotonic) -> None:
+                 ankle_in_realtime: bool = False, sensor_wait_s: float = 0.4,
+                 governor: GovernorConfig | None = None, wall: Callable[[], float] = time.monotonic) -> None:
         self.out, self.wall, self.governor_config = out, wall, governor
         self.ctrl = ctrl
         self.learned_network = storage.to_dict(ctrl)  # the loaded network, to start over from (a sim reset)
@@ -188,11 +189,13 @@ class CPGDriver:
         self.sample_ages = {"ticks": 0, "max_s": 0.0, "older_than_ankle_max": 0}
         self._cmd_logged: tuple | None = None
         self.cmd_turn = "ok"  # ok | why angular.z cannot turn the robot
+        self.ankle_allowed = self.lockstep or bool(ankle_in_realtime)
         self._start(feedback)
 
     def _start(self, fb: FeedbackController) -> None:
         """The state of a fresh run: the source from t = 0, no tick yet, empty buffers."""
         fb.weight = self.fade.weight
+        fb.ankle_allowed = self.ankle_allowed
         self.source = FeedbackGaitSource(self.ctrl, fb, zeta=self.zeta, alpha=self.alpha,
                                          governor=self.governor_config)
         self.source.keep_traces = False  # plots' traces: a node's memory stays flat
@@ -593,6 +596,7 @@ class CPGDriver:
              "feedback_weight": f"{self.fade.weight:.6g}",
              "sensor_age_s": "none" if self.sensor_age_s is None else f"{self.sensor_age_s:.3f}",
              "feedback_pathways": ",".join(fb.pathways), "phase_resets": str(len(fb.resets)),
+             "ankle_allowed": str(self.ankle_allowed).lower(),
              **{k: str(n) for k, n in c.items()},
              "reentries": str(self.reentries), "reentry_cause": self.reentry_cause,
              "rejoined_at_s": "none" if self.rejoined_at_s is None else f"{self.rejoined_at_s:.3f}",
@@ -620,7 +624,7 @@ class CPGDriver:
                     "dropped": c["sensors_dropped"], "wait_timeouts": c["sensor_wait_timeouts"],
                     "clock_dropped": c["clock_dropped"], "targets_withheld": c["targets_withheld"],
                     "sample_age": {**self.sample_ages, "max_s": round(self.sample_ages["max_s"], 4)},
-                    "ankle_fresh": fb.ankle_fresh}
+                    "ankle_allowed": self.ankle_allowed, "ankle_fresh": fb.ankle_fresh}
         return {**self.activity.summary(), "overruns": timing["overruns"], "tick": timing,
                 "feedback": feedback, "cmd_vel": self.cmd_vel_counts, "rejoined_at_s": self.rejoined_at_s,
                 "reentries": self.reentries, "clock_resets": self.clock_resets}

@@ -355,6 +355,7 @@ class FeedbackController:
         self._rate = LowPass(cfg.ankle_rate_time_constant_s)
         self.rate = np.zeros(3)  # the angular velocity the ankle pathway uses (low-passed, rad/s)
         self.ankle_fresh = 1.0  # the ankle pathway's freshness weight (sample age, ``observe``)
+        self.ankle_allowed = True  # False: the ankle pathway stays out (a loop without bounded delay)
         self.touchdowns = (False, False)  # (left, right) events of the last observe
         self.resets: list[tuple[float, float]] = []  # (t, Δ rad)
 
@@ -419,7 +420,7 @@ class FeedbackController:
         self.yaw = yaw if self._t is None else self.yaw + wrap(yaw - self.yaw)
         self.gyro = np.asarray(gyro, dtype=float)
         self.rate = self._rate.update(self.gyro, dt).copy()
-        want = 1.0 if age_s <= self.cfg.ankle_max_sample_age_s else 0.0
+        want = 1.0 if self.ankle_allowed and age_s <= self.cfg.ankle_max_sample_age_s else 0.0
         step = math.inf if self.cfg.ankle_fade_s <= 0 else dt / self.cfg.ankle_fade_s
         self.ankle_fresh = min(want, self.ankle_fresh + step) if want > self.ankle_fresh \
             else max(want, self.ankle_fresh - step)
