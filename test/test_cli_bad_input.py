@@ -159,7 +159,7 @@ OUT_COMMANDS = {
     "bench": [], "cmd-vel-map": [], "cpg-walk": [], "demo": [], "drive-check": [], "envelope": [],
     "faults": [], "feedback-search": [], "fit": ["--csv", "{csv}"], "learn": [], "margins": [],
     "plot": ["{bag}"], "record": [], "replay": [], "section2": [], "soak": [], "sweep": [], "transport": [],
-    "results": [], "two-hosts": [], "walk": [], "random-walks": [], "pushes": [],
+    "results": [], "two-hosts": [], "walk": [], "random-walks": [], "pushes": [], "transitions": [],
 }
 OUT_OPTIONS = [(cmd, "--out") for cmd in OUT_COMMANDS] + [("graph", "--log-dir"), ("graph", "--record")]
 
