@@ -25,12 +25,10 @@ def _run(args: argparse.Namespace) -> int:
     import sys
 
     from cpg_walker.experiments.sweep import load_config
-    from cpg_walker.experiments.transitions import run_transitions
+    from cpg_walker.experiments.transitions import from_config, run_transitions
 
-    t = load_config()["transitions"]
-    states = tuple(tuple(float(x) for x in s) for s in t["states"])
-    times = tuple(float(t[k]) for k in ("from_s", "to_s", "after_s"))
-    r = run_transitions(args.out, states, args.phases or int(t["phases"]), args.jobs, times,
+    states, phases, times = from_config(load_config()["transitions"])
+    r = run_transitions(args.out, states, args.phases or phases, args.jobs, times,
                         command=" ".join(["cpg-walker", *sys.argv[1:]]))
     for run in r["runs"]:
         if run["fell"]:

@@ -188,12 +188,10 @@ def run_sweep(out_dir: str | Path, quick: bool = False, jobs: int | None = None,
                       str(plot_alpha(report, out / "alpha.png")),
                       str(plot_fig8(report, out / "fig8.png"))]
     (out / "sweep.md").write_text(markdown(report))
-    from cpg_walker.experiments.transitions import run_transitions
+    from cpg_walker.experiments.transitions import from_config, run_transitions
 
-    t = cfg["transitions"]
-    times = tuple(float(t[k]) for k in ("from_s", "to_s", "after_s"))
-    tr = run_transitions(out, tuple(tuple(float(x) for x in s) for s in t["states"]), int(t["phases"]), jobs,
-                         times)
+    states, phases, times = from_config(cfg["transitions"])
+    tr = run_transitions(out, states, phases, jobs, times)
     report["transitions"] = {"falls": tr["falls"], "runs": len(tr["runs"])}
     report["pngs"].append(str(out / "transitions.png"))
     return report

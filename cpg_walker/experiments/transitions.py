@@ -47,6 +47,12 @@ def _run(item: tuple[dict, WalkSpec]) -> dict:
             "error": r.get("error")}
 
 
+def from_config(t: dict) -> tuple[tuple[tuple[float, float], ...], int, tuple[float, float, float]]:
+    """(states, phases, (from, to, after) sim s) of config/sweep.yaml's ``transitions:`` section."""
+    states = tuple((float(z), float(a)) for z, a in t["states"])
+    return states, int(t["phases"]), (float(t["from_s"]), float(t["to_s"]), float(t["after_s"]))
+
+
 def run_transitions(out_dir: str | Path, states=STATES, phases: int = 4, jobs: int | None = None,
                     times: tuple[float, float, float] = (FROM_S, TO_S, AFTER_S), command: str = "") -> dict:
     """Walk the map; write DIR/transitions.json and transitions.png; return the report (``command``: the
