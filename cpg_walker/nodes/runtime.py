@@ -323,6 +323,25 @@ def spin_hot(node, hot: HotPath, executor_period: float = 0.02, idle=None) -> No
             next_slow = now + executor_period
 
 
+def _stop_without_raising() -> None:
+    """Ctrl-C without KeyboardInterrupt. rclpy's SIGINT handler (installed by ``rclpy.init``) shuts the
+    context down, which ends every loop of ours (they run ``while rclpy.ok()``), and then calls the
+    handler Python had. Python's default raises KeyboardInterrupt in whatever code runs next: a garbage
+    collector callback, a message's conversion, a ``__del__``, where it cannot be caught and prints a
+    traceback. This one raises only before rclpy's is in place (nothing else would stop the process)."""
+    import signal
+
+    from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options
+
+    rclpy_handles_it = (SignalHandlerOptions.ALL, SignalHandlerOptions.SIGINT)
+
+    def on_sigint(signum, frame) -> None:
+        if get_current_signal_handlers_options() not in rclpy_handles_it:
+            raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, on_sigint)
+
+
 def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None) -> int:
     """rclpy.init, build the node, then ``loop(node)`` (default: spin) until Ctrl-C/SIGTERM/shutdown;
     destroy the node and shut down without a traceback. Returns the exit status."""
@@ -330,6 +349,7 @@ def run_main(argv: list[str], make_node: Callable, loop: Callable | None = None)
     from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
+    _stop_without_raising()
     rclpy.init(args=argv)
     node = None
     status = 0
