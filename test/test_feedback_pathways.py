@@ -1,4 +1,5 @@
-"""Our feedback pathways (walker/feedback.py beyond the paper: amplitude, reset_both, heading), the run-time
+"""Our feedback pathways (walker/feedback.py beyond the paper: amplitude, reset_both, heading, ankle,
+free_leg), the run-time
 API (observe with the IMU quaternion, weight, set_pathways, set_config, turn_rate) and config validation."""
 
 import itertools
@@ -311,7 +312,8 @@ def test_run_time_api_validates(learned):
     ("amp_slow_slope_knee", -2.5),
     ("reset_phase_backward_rad", 4.0), ("tilt_time_constant_s", -0.1), ("gain_scale", "x"),
     ("lateral_sign", 0.5), ("reset_strength", 0.0), ("heading_reference", "north"),
-    ("reset_min_abs_zeta", -1.0), ("reset_min_alpha", -0.1),
+    ("reset_min_abs_zeta", -1.0), ("reset_min_alpha", -0.1), ("free_leg_gain", -1.0),
+    ("free_leg_limit_rad", 0.8), ("free_leg_max_alpha", 0.0), ("free_leg_unloaded_n", -5.0),
 ])
 def test_bad_config_values_are_refused_naming_the_field(field, value):
     with pytest.raises(ValueError, match=field):
@@ -395,3 +397,66 @@ def test_the_ankle_pathway_acts_only_on_fresh_samples():
     assert fb.ankle_fresh == 0.0 and gone == (0.0, 0.0)
     back = [tick(50 + 2 * n + k, cfg.ankle_max_sample_age_s) for k in range(n + 1)][-1]
     assert fb.ankle_fresh == 1.0 and back == pytest.approx(fresh)
+
+
+def _rolled(roll: float) -> np.ndarray:
+    return np.array([math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0])  # about the forward (x) axis
+
+
+def test_the_free_leg_pathway_swings_the_unloaded_upper_leg_out_while_standing():
+    """free_leg: past the tilt threshold, with the upper sole off the ground, both hip rolls turn outward
+    (the free leg by free_leg_gain, the stance leg by free_leg_stance_gain per rad beyond the threshold,
+    each clipped); mirrored for the other side; nothing in double support, with the lower foot lifted,
+    below the threshold, or at α >= free_leg_max_alpha (half at half of it)."""
+    cfg = FeedbackConfig.load(tilt_time_constant_s=0.0)
+    fb = FeedbackController(cfg, ("free_leg",))
+    tilt = cfg.free_leg_threshold_rad + 0.05
+
+    def offsets(roll: float, loads: tuple[float, float], alpha: float = 0.0) -> tuple[float, float]:
+        fb.observe(0.0, _rolled(roll), np.zeros(3), loads)
+        return fb.free_leg_offsets(alpha)
+
+    free = min(cfg.free_leg_gain * 0.05, cfg.free_leg_limit_rad)
+    stance = min(cfg.free_leg_stance_gain * 0.05, cfg.free_leg_limit_rad)
+    assert fb.psi[0] == 0.0 and free > 0.0 and stance > 0.0
+    # tilted right (ψ_lat > 0): the left foot is the upper one; outward = +roll left, -roll right
+    assert offsets(tilt, (0.0, 70.0)) == pytest.approx((free, -stance))
+    assert fb.psi[0] == pytest.approx(tilt)
+    assert offsets(-tilt, (70.0, 0.0)) == pytest.approx((stance, -free))
+    assert offsets(tilt, (30.0, 40.0)) == (0.0, 0.0)  # double support
+    assert offsets(tilt, (70.0, 0.0)) == (0.0, 0.0)  # the lower foot lifted: not a fall over the edge
+    assert offsets(cfg.free_leg_threshold_rad - 0.005, (0.0, 70.0)) == (0.0, 0.0)
+    assert offsets(tilt, (0.0, 70.0), cfg.free_leg_max_alpha) == (0.0, 0.0)  # walking
+    assert offsets(tilt, (0.0, 70.0), cfg.free_leg_max_alpha / 2) == pytest.approx((free / 2, -stance / 2))
+    assert offsets(1.0, (0.0, 70.0))[0] == pytest.approx(cfg.free_leg_limit_rad)
+    fb.weight = 0.0
+    assert offsets(tilt, (0.0, 70.0)) == (0.0, 0.0)
+    assert FeedbackController(cfg, ("ankle",)).free_leg_offsets(0.0) == (0.0, 0.0)
+
+
+def test_the_free_leg_offsets_reach_the_hip_roll_targets(learned):
+    """Two standing sources tilted alike, one with its upper sole off the ground: their targets differ by
+    the free_leg offsets, on the hip rolls only; the forecast carries them."""
+    def source() -> FeedbackGaitSource:
+        fb = FeedbackController(FeedbackConfig.load(tilt_time_constant_s=0.0), ("free_leg",))
+        return FeedbackGaitSource(_ctrl(learned), fb, alpha=0.0)
+
+    lifted, planted = source(), source()
+    h = lifted.ctrl.settings.control_dt
+    t = np.ceil(lifted.active_from / h) * h
+    while lifted.ctrl.alpha > 1e-3 and t < lifted.active_from + 20.0:  # the recording's steps ending
+        for src in (lifted, planted):
+            src.observe(t, UP, np.zeros(3), (35.0, 35.0))
+            src.targets(t)
+        t += h
+    for src, loads in ((lifted, (0.0, 70.0)), (planted, (35.0, 35.0))):
+        src.observe(t, _rolled(0.1), np.zeros(3), loads)
+    assert lifted.ctrl.alpha < lifted.fb.cfg.free_leg_max_alpha
+    want = lifted.fb.free_leg_offsets(lifted.ctrl.alpha)
+    assert want[0] > 0.01 and want[1] < -0.01 and planted.fb.free_leg_offsets(0.0) == (0.0, 0.0)
+    diff = lifted.targets(t)[0] - planted.targets(t)[0]
+    roll_idx = [JOINT_NAMES.index(f"{s}leg_joint_2") for s in "lr"]
+    assert diff[roll_idx] == pytest.approx(want)
+    assert np.abs(np.delete(diff, roll_idx)).max() == 0.0
+    ahead = lifted.forecast(np.array([t]))[0][0] - planted.forecast(np.array([t]))[0][0]
+    assert ahead[roll_idx] == pytest.approx(want)

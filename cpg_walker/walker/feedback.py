@@ -44,7 +44,12 @@ How we read the paper:
   Δq_pitch = k_p·ψ_pend + k_pd·ω_y and Δq_roll = k_r·ψ_lat + k_rd·ω_x (ψ the filtered tilt, ω the chest's
   angular velocity), clipped to ``ankle_limit_rad``: a forward lean or pitch rate plantar-flexes, a right
   lean or roll rate rolls the soles against it, which moves the centre of pressure under the falling
-  chest (it damps the growing sway that preceded the random sequences' falls).
+  chest (it damps the growing sway that preceded the random sequences' falls). ``free_leg``: a
+  counterweight while standing — when the lateral tilt |ψ_lat| passes ``free_leg_threshold_rad`` and the
+  upper foot (the left one for a tilt to the right) is off the ground, that leg's hip roll (Hip1) swings
+  it outward by Δq = k·(|ψ_lat| − threshold), clipped to ``free_leg_limit_rad``: its mass moves against the
+  fall and its swing's reaction turns the body back. Full at applied α 0, fading out by
+  ``free_leg_max_alpha`` (walking's swing foot is off the ground every step).
 
 Every action (g, reset shift, amplitude factors, hip-yaw and ankle offsets) is scaled by ``weight`` ∈ [0, 1]
 (a ROS node fades feedback out with it when its sensor data go stale); weight 0 is the open loop.
@@ -65,7 +70,7 @@ from cpg_walker.robot.joints import CONTROLLED_JOINTS, PAPER_LEG_DOFS, SIDES
 
 #: The paper's pathways (Sec. III-B, as printed) and ours (module docstring).
 PAPER_PATHWAYS = ("lateral", "pendulum", "reset")
-PATHWAYS = (*PAPER_PATHWAYS, "amplitude", "reset_both", "heading", "ankle")
+PATHWAYS = (*PAPER_PATHWAYS, "amplitude", "reset_both", "heading", "ankle", "free_leg")
 
 
 def _dofs(paper: str) -> tuple[int, ...]:
@@ -83,6 +88,8 @@ HIP_YAW = tuple(f"{s}leg_joint_1" for s in SIDES)
 #: The ankle pathway's joints (names): both Ankle1 (pitch), both Ankle2 (roll).
 ANKLE_PITCH_JOINTS = tuple(f"{s}leg_joint_{PAPER_LEG_DOFS['Ankle1']}" for s in SIDES)
 ANKLE_ROLL_JOINTS = tuple(f"{s}leg_joint_{PAPER_LEG_DOFS['Ankle2']}" for s in SIDES)
+#: The free_leg pathway's joints (names): the hip roll (Hip1) of each leg, in SIDES order.
+HIP_ROLL_JOINTS = tuple(f"{s}leg_joint_{PAPER_LEG_DOFS['Hip1']}" for s in SIDES)
 
 
 @dataclass(frozen=True)
@@ -132,6 +139,13 @@ class FeedbackConfig:
     ankle_rate_time_constant_s: float  # low-pass on the angular velocity it uses (the sway, not the impacts)
     ankle_max_sample_age_s: float  # it acts only on sensor samples at most this old (sim s) ...
     ankle_fade_s: float  # ... fading out over this when they are older, and back in when fresh again
+    # ours ("free_leg"): the unloaded upper leg's hip roll swung outward while standing
+    free_leg_gain: float  # rad of hip roll per rad of lateral tilt beyond the threshold
+    free_leg_stance_gain: float  # the same for the stance (lower) leg's hip roll, outward too
+    free_leg_threshold_rad: float  # |ψ_lat| below this: no action
+    free_leg_limit_rad: float  # |offset| clip
+    free_leg_max_alpha: float  # full at applied α 0, none from this α on (linear in between)
+    free_leg_unloaded_n: float  # a sole bearing less than this (N) is off the ground
 
     def __post_init__(self) -> None:
         if self.lateral_mode not in ("abs", "signed"):
@@ -150,7 +164,9 @@ class FeedbackConfig:
                 raise InputError(f"{name} must be in (0, 1], got {getattr(self, name)}")
         for name in ("gain_scale", "g_limit", "tilt_time_constant_s", "heading_gain", "heading_limit_rad",
                      "ankle_rate_time_constant_s", "ankle_max_sample_age_s", "ankle_fade_s",
-                     "heading_time_constant_s", "reset_min_abs_zeta", "reset_min_alpha"):
+                     "heading_time_constant_s", "reset_min_abs_zeta", "reset_min_alpha", "free_leg_gain",
+                     "free_leg_stance_gain",
+                     "free_leg_threshold_rad", "free_leg_unloaded_n"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 <= self.ankle_limit_rad <= 0.3:
@@ -159,6 +175,11 @@ class FeedbackConfig:
         for name in ("ankle_pitch_gain", "ankle_pitch_rate_gain", "ankle_roll_gain", "ankle_roll_rate_gain"):
             if abs(getattr(self, name)) > 5.0:
                 raise InputError(f"{name} must be in [-5, 5], got {getattr(self, name)}")
+        if not 0.0 <= self.free_leg_limit_rad <= 0.6:
+            raise InputError(f"free_leg_limit_rad must be in [0, 0.6] rad (hip roll offsets), "
+                             f"got {self.free_leg_limit_rad}")
+        if not 0.0 < self.free_leg_max_alpha <= 1.0:
+            raise InputError(f"free_leg_max_alpha must be in (0, 1], got {self.free_leg_max_alpha}")
         if self.heading_limit_rad > 0.5:
             raise InputError(f"heading_limit_rad must be <= 0.5 rad (hip-yaw offsets), "
                              f"got {self.heading_limit_rad}")
@@ -357,6 +378,7 @@ class FeedbackController:
         self.ankle_fresh = 1.0  # the ankle pathway's freshness weight (sample age, ``observe``)
         self.ankle_allowed = True  # False: the ankle pathway stays out (a loop without bounded delay)
         self.touchdowns = (False, False)  # (left, right) events of the last observe
+        self.loads = (0.0, 0.0)  # (left, right) sole loads of the last observe (N)
         self.resets: list[tuple[float, float]] = []  # (t, Δ rad)
 
     # ---- run-time settings
@@ -431,6 +453,7 @@ class FeedbackController:
             self.heading_error = float(self._herr.update(np.array([self.heading_ref - self.yaw]), dt)[0])
         self._t = t
         self.touchdowns = self.touch.update(t, loads)
+        self.loads = (float(loads[0]), float(loads[1]))
 
     # ---- actions (all × weight)
     def g(self, zeta: float) -> np.ndarray:
@@ -475,6 +498,23 @@ class FeedbackController:
         dp = c.ankle_pitch_gain * self.psi[1] + c.ankle_pitch_rate_gain * float(self.rate[1])
         dr = c.ankle_roll_gain * self.psi[0] + c.ankle_roll_rate_gain * float(self.rate[0])
         return (w * min(max(dp, -lim), lim), w * min(max(dr, -lim), lim))
+
+    def free_leg_offsets(self, alpha: float) -> tuple[float, float]:
+        """Hip roll (Hip1) offsets (rad) of the (left, right) legs ("free_leg"; zeros without it, in double
+        support, below the threshold, or from ``free_leg_max_alpha`` on): the upper leg, when its sole is
+        off the ground, swung outward against the tilt."""
+        c = self.cfg
+        fade = 1.0 - alpha / c.free_leg_max_alpha
+        w = self._weight * min(fade, 1.0)
+        excess = abs(self.psi[0]) - c.free_leg_threshold_rad
+        if "free_leg" not in self.pathways or w <= 0.0 or excess <= 0.0:
+            return 0.0, 0.0
+        upper = 0 if self.psi[0] > 0 else 1  # ψ_lat > 0: tilted to the right, the left foot is the upper one
+        if self.loads[upper] >= c.free_leg_unloaded_n:
+            return 0.0, 0.0
+        u = w * min(c.free_leg_gain * excess, c.free_leg_limit_rad)  # outward: +roll left, -roll right
+        v = w * min(c.free_leg_stance_gain * excess, c.free_leg_limit_rad)
+        return (u, -v) if upper == 0 else (v, -u)
 
     def heading_amplitude(self) -> float:
         """u (rad) of the heading pathway's hip-yaw oscillation (0 without it or before the capture)."""

@@ -20,6 +20,7 @@ from cpg_walker.walker.feedback import (
     ANKLE2,
     ANKLE_PITCH_JOINTS,
     ANKLE_ROLL_JOINTS,
+    HIP_ROLL_JOINTS,
     HIP_YAW,
     KNEE,
     RIGHT_HIP2,
@@ -30,9 +31,11 @@ from cpg_walker.walker.feedback import (
 )
 from cpg_walker.walker.governor import Governor, GovernorConfig
 
-#: Indices (of all joints) the ankle pathway offsets; sim s over which a forecast's offset dies out.
+#: Indices (of all joints) the ankle and free_leg pathways offset; sim s over which a forecast's offset
+#: dies out.
 ANKLE_PITCH = np.array([JOINT_NAMES.index(j) for j in ANKLE_PITCH_JOINTS])
 ANKLE_ROLL = np.array([JOINT_NAMES.index(j) for j in ANKLE_ROLL_JOINTS])
+HIP_ROLL = np.array([JOINT_NAMES.index(j) for j in HIP_ROLL_JOINTS])
 ANKLE_HOLD_S = 0.1
 
 
@@ -318,6 +321,7 @@ class FeedbackGaitSource(CPGGaitSource):
         self._yaw_u = 0.0
         self._yaw_idx = np.array([JOINT_NAMES.index(j) for j in HIP_YAW])
         self._ankle = (0.0, 0.0)  # the ankle pathway's (pitch, roll) offsets
+        self._free_leg = (0.0, 0.0)  # the free_leg pathway's (left, right) hip roll offsets
 
     def observe(self, t: float, quat_wxyz: np.ndarray, gyro: np.ndarray, loads: tuple[float, float],
                 age_s: float = 0.0) -> None:
@@ -342,6 +346,7 @@ class FeedbackGaitSource(CPGGaitSource):
             fb.resets.append((t, d))
         self._yaw_u = fb.heading_amplitude()
         self._ankle = fb.ankle_offsets()
+        self._free_leg = fb.free_leg_offsets(self.ctrl.alpha)
         if self.keep_traces and t >= self._next_trace - 1e-9:  # one per trace_dt, whatever the tick rate
             self.g_trace.append((t, *fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
             self._next_trace = t + self.trace_dt
@@ -359,22 +364,23 @@ class FeedbackGaitSource(CPGGaitSource):
         super().reenter(t, zeta, alpha)
         self.active_from = self.handover + self.blend
         self._yaw_u = 0.0
-        self._ankle = (0.0, 0.0)
+        self._ankle = self._free_leg = (0.0, 0.0)
 
     def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         q, qd = super().targets(t)
-        if (self._yaw_u != 0.0 or self._ankle != (0.0, 0.0)) and t >= self.active_from:
+        if self._offsets_act() and t >= self.active_from:
             q, qd = q.copy(), qd.copy()
             self._add_hip_yaw(q, qd, 0.0)
             q[ANKLE_PITCH] += self._ankle[0]
             q[ANKLE_ROLL] += self._ankle[1]
+            q[HIP_ROLL] += self._free_leg
         return q, qd
 
     def forecast(self, times: np.ndarray, fade: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """`CPGGaitSource.forecast` plus the heading pathway's hip-yaw oscillation at the held u (its
         phase advanced at the current frequency; ``fade`` scales it with the steps)."""
         q, qd = super().forecast(times, fade)
-        if self._yaw_u != 0.0 or self._ankle != (0.0, 0.0):
+        if self._offsets_act():
             times = np.asarray(times, dtype=float).reshape(-1)
             for k in np.flatnonzero(times >= self.active_from):
                 ahead = max(float(times[k]) - self._t_net, 0.0)
@@ -383,7 +389,12 @@ class FeedbackGaitSource(CPGGaitSource):
                 hold = scale * math.exp(-ahead / ANKLE_HOLD_S)  # a reaction to now: it dies out ahead
                 q[k, ANKLE_PITCH] += hold * self._ankle[0]
                 q[k, ANKLE_ROLL] += hold * self._ankle[1]
+                q[k, HIP_ROLL] += hold * np.asarray(self._free_leg)
         return q, qd
+
+    def _offsets_act(self) -> bool:
+        """Any of the heading, ankle and free_leg pathways' joint offsets is non-zero now."""
+        return self._yaw_u != 0.0 or self._ankle != (0.0, 0.0) or self._free_leg != (0.0, 0.0)
 
     def _add_hip_yaw(self, q: np.ndarray, qd: np.ndarray, ahead_s: float, scale: float = 1.0) -> None:
         if self._yaw_u == 0.0:
