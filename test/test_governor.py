@@ -98,6 +98,19 @@ def test_below_the_slowest_zeta_it_stands_and_keeps_its_direction():
     assert _run(gov, cpg, 0.1)[-1][1] == 0.0
 
 
+@pytest.mark.parametrize("start, wanted", [(-1.0, 0.01), (1.0, 0.05), (1.0, -0.2)])
+def test_a_request_slower_than_the_envelope_stands_with_the_slowest_rhythm(start, wanted):
+    """|ζ| below the envelope's first point: α 0, and the oscillators turn at that point's ζ in the requested
+    direction (not near 0, where the learned network's phase relations drift), with the reason."""
+    gov, cpg = Governor(CFG, start, 1.0), Lagged(start, 1.0)
+    gov.request(wanted, 0.8)
+    trace = _run(gov, cpg, 12.0)
+    slowest = math.copysign(ENV.slowest(wanted), wanted)
+    assert trace[-1][:2] == (slowest, 0.0) and gov.state == "standing"
+    assert f"zeta {wanted:g}: stands" in gov.reason and f"{slowest:g}" in gov.reason
+    assert all(a == 0.0 or abs(z) >= 0.3 for z, a, *_ in trace)  # never stepping below the slowest
+
+
 def test_the_packaged_config_loads_and_a_broken_one_names_the_problem(tmp_path):
     cfg = GovernorConfig.load()
     assert cfg.envelope.alpha_max(1.0) > 0 and cfg.envelope.alpha_max(0.0) == 0.0

@@ -7,7 +7,9 @@ What it does, each rule from a measured fall (config/governor.yaml says which):
 
 * **Envelope**: α is at most ``Envelope.alpha_max(ζ)`` — the step length that walks at that frequency,
   interpolated from a measured table, forward and backward apart (slow walking needs short steps; |ζ|
-  below the table's first point stands: α 0).
+  below the table's first point stands: α 0, while the oscillators keep turning at that first point's
+  rhythm — near ζ 0 the learned network's phase relations drift: after 12 s at ζ 0.01 one DOF had moved
+  1.6 rad from its place in the gait, and raising α 15 s after stepping off from there fell).
 * **Slowing down**: when the requested ζ allows less α than is applied, α comes down first (ζ held) and
   ζ follows once the applied α fits the new ζ's envelope. **Speeding up** the other way round: α rises
   only once the applied ζ is within ``reverse_zeta_tolerance`` of the new one (both rising together fell:
@@ -63,6 +65,10 @@ class Envelope:
     def alpha_top(self) -> float:
         """The largest α_max of either direction."""
         return max(a for pts in (self.forward, self.backward) for _, a in pts)
+
+    def slowest(self, zeta: float) -> float:
+        """The smallest |ζ| that steps in ``zeta``'s direction (the table's first point)."""
+        return (self.forward if zeta >= 0 else self.backward)[0][0]
 
     def alpha_max(self, zeta: float) -> float:
         pts = self.forward if zeta >= 0 else self.backward
@@ -193,6 +199,9 @@ class Governor:
         cfg = self.cfg
         env = cfg.open_loop if open_loop and cfg.open_loop is not None else cfg.envelope
         zr, ar = self.requested
+        too_slow = zr != 0.0 and abs(zr) < env.slowest(zr)
+        if too_slow:  # it stands (α 0) with the oscillators at the slowest rhythm that steps (module doc)
+            zr, ar = math.copysign(env.slowest(zr), zr), 0.0
         direction = 1.0 if self.zeta >= 0 else -1.0
         step_off = math.copysign(min(abs(zr), STEP_OFF_ZETA), zr)  # steps begin at most at the learned rhythm
         if zr != 0.0 and (zr > 0) != (direction > 0):  # the other way
@@ -222,6 +231,9 @@ class Governor:
             why = f"zeta {z_target:g} first, then alpha {a_target:.3g}"  # α and ζ rising together fell
             return self._set("accelerating", why, z_target, self.alpha, dt)
         limit = ""
+        if too_slow:
+            limit = f"zeta {self.requested[0]:g}: stands (the measured envelope), its rhythm held at {zr:g}"
+            return self._set("standing", limit, z_target, 0.0, dt)
         if a_target < ar:
             why = "stands" if a_max == 0.0 else f"alpha limited to {a_max:.3g}"
             limit = f"zeta {z_target:g}: {why} (the measured envelope)"
