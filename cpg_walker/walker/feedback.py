@@ -44,15 +44,16 @@ How we read the paper:
   Δq_pitch = k_p·ψ_pend + k_pd·ω_y and Δq_roll = k_r·ψ_lat + k_rd·ω_x (ψ the filtered tilt, ω the chest's
   angular velocity), clipped to ``ankle_limit_rad``: a forward lean or pitch rate plantar-flexes, a right
   lean or roll rate rolls the soles against it, which moves the centre of pressure under the falling
-  chest (it damps the growing sway that preceded the random sequences' falls). ``free_leg``: a
-  counterweight while standing — when the lateral tilt |ψ_lat| passes ``free_leg_threshold_rad`` and the
-  upper foot (the left one for a tilt to the right) is off the ground, that leg's hip roll (Hip1) swings
-  it outward by Δq = k·(|ψ_lat| − threshold), clipped to ``free_leg_limit_rad``: its mass moves against the
-  fall and its swing's reaction turns the body back. Full at applied α 0, fading out by
-  ``free_leg_max_alpha`` (walking's swing foot is off the ground every step).
+  chest (it damps the growing sway that preceded the random sequences' falls). ``free_leg``: while
+  standing, when the lateral tilt |ψ_lat| passes ``free_leg_threshold_rad`` and the upper foot (the left
+  one for a tilt to the right) is off the ground, both hip rolls (Hip1) turn outward: the free leg's by
+  k·e (its mass a counterweight against the fall), the stance leg's by k_s·e (turning the body back over
+  its foot), e = |ψ_lat| − threshold, each clipped to ``free_leg_limit_rad``. Full at applied α 0, fading
+  out by ``free_leg_max_alpha`` (walking's swing foot is off the ground every step).
 
-Every action (g, reset shift, amplitude factors, hip-yaw and ankle offsets) is scaled by ``weight`` ∈ [0, 1]
-(a ROS node fades feedback out with it when its sensor data go stale); weight 0 is the open loop.
+Every action (g, reset shift, amplitude factors, hip-yaw, ankle and hip-roll offsets) is scaled by
+``weight`` ∈ [0, 1] (a ROS node fades feedback out with it when its sensor data go stale); weight 0 is the
+open loop.
 """
 
 from __future__ import annotations
@@ -165,8 +166,7 @@ class FeedbackConfig:
         for name in ("gain_scale", "g_limit", "tilt_time_constant_s", "heading_gain", "heading_limit_rad",
                      "ankle_rate_time_constant_s", "ankle_max_sample_age_s", "ankle_fade_s",
                      "heading_time_constant_s", "reset_min_abs_zeta", "reset_min_alpha", "free_leg_gain",
-                     "free_leg_stance_gain",
-                     "free_leg_threshold_rad", "free_leg_unloaded_n"):
+                     "free_leg_stance_gain", "free_leg_threshold_rad", "free_leg_unloaded_n"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 <= self.ankle_limit_rad <= 0.3:
@@ -501,8 +501,9 @@ class FeedbackController:
 
     def free_leg_offsets(self, alpha: float) -> tuple[float, float]:
         """Hip roll (Hip1) offsets (rad) of the (left, right) legs ("free_leg"; zeros without it, in double
-        support, below the threshold, or from ``free_leg_max_alpha`` on): the upper leg, when its sole is
-        off the ground, swung outward against the tilt."""
+        support, below the threshold, or from ``free_leg_max_alpha`` on): when the upper sole is off the
+        ground, both legs turned outward, the free one by ``free_leg_gain``, the stance one by
+        ``free_leg_stance_gain`` per rad of tilt beyond the threshold."""
         c = self.cfg
         fade = 1.0 - alpha / c.free_leg_max_alpha
         w = self._weight * min(fade, 1.0)
