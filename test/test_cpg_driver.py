@@ -198,3 +198,12 @@ def test_the_ankle_pathway_acts_in_lockstep_or_when_allowed_in_realtime() -> Non
         assert d.fade.weight == 1.0  # the pathways closed
     assert offsets["realtime"] == (0.0, 0.0)
     assert all(abs(v) > 0.01 for v in (*offsets["allowed"], *offsets["lockstep"])), offsets
+
+
+def test_started_at_alpha_0_it_stands_without_the_recorded_opening_steps() -> None:
+    """α 0 at the start: the source fades in from standing (no recorded steps to stop from); otherwise the
+    recording's opening steps hand over to the CPG."""
+    for alpha, transition in ((0.0, "standing"), (0.6, "recording")):
+        ctrl, settings = _setup()
+        d, _ = _make(ctrl, {**settings, "alpha": alpha})
+        assert d.source.transition == transition
