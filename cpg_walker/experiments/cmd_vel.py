@@ -79,12 +79,13 @@ def measure_speed_map(out: str | Path, jobs: int = 2, window_s: float = MAP_WIND
 @dataclass(frozen=True)
 class Drive:
     """One in-process drive: the robot walks at ζ = α = 1 (the node's start) until ``t0``, then gets
-    Twist ``segments`` [(until_s, linear_x, angular_z), ...] at ``rate_hz`` from ``t0``; nothing after the
+    Twist ``segments`` [(until_s, linear_x, angular_z[, linear_y]), ...] at ``rate_hz`` from ``t0``;
+    nothing after the
     last segment (the timeout stops it); the walk ends ``tail_s`` after it. ``measure``: the
     (from, to) sim-s windows the table reports (default: the last 60 % of each segment)."""
 
     label: str
-    segments: tuple[tuple[float, float, float], ...]
+    segments: tuple[tuple[float, ...], ...]
     t0: float = 10.0
     rate_hz: float = 10.0
     tail_s: float = 8.0
@@ -129,18 +130,18 @@ class DrivenSource:
     commands due are given to the follower and its output applied (walker/cmd_vel.py apply_output), as
     cpg_node does on each /clock tick. Logs (t, ζ cmd, α cmd, turn rate, state) every 0.1 s."""
 
-    def __init__(self, source, follower: CmdVelFollower, commands: list[tuple[float, float, float]]):
+    def __init__(self, source, follower: CmdVelFollower, commands: list[tuple[float, ...]]):
         self.src, self.follower = source, follower
         self.names = source.names
-        self.commands = commands  # (t, vx, wz), sorted
+        self.commands = commands  # (t, vx, wz, vy), sorted
         self.log: list[tuple[float, float, float, float, str]] = []
         self._next_log = 0.0
 
     def observe(self, t, quat_wxyz, gyro, loads) -> None:
         src = self.src
         while self.commands and self.commands[0][0] <= t + 1e-9:
-            _, vx, wz = self.commands.pop(0)
-            self.follower.command(t, vx, wz)
+            _, vx, wz, vy = self.commands.pop(0)
+            self.follower.command(t, vx, wz, vy)
         if t >= src.active_from:
             out = self.follower.update(t, src.ctrl.zeta, src.ctrl.alpha)
             if out is not None:
@@ -176,9 +177,9 @@ def run_drive(drive: Drive, map_file: str | None = None) -> dict:
     follower.alpha_rate = drive.alpha_rate
     follower.reverse_alpha_rate = drive.reverse_alpha_rate
     cmds, t = [], drive.t0
-    for until, vx, wz in drive.segments:
+    for until, vx, wz, vy in _segments(drive):
         while t < until - 1e-9:
-            cmds.append((round(t, 6), vx, wz))
+            cmds.append((round(t, 6), vx, wz, vy))
             t += 1.0 / drive.rate_hz
     t_last = cmds[-1][0]
     driven = DrivenSource(src, follower, cmds)
@@ -189,11 +190,14 @@ def run_drive(drive: Drive, map_file: str | None = None) -> dict:
                  "fall_time_s": None if r.fall_time_s is None else round(float(r.fall_time_s), 3),
                  "last_command_s": t_last, "timeout_s": limits.timeout, "segments": []}
     start = drive.t0
-    for k, (until, vx, wz) in enumerate(drive.segments):
+    for k, (until, vx, wz, vy) in enumerate(_segments(drive)):
         a, b = drive.windows[k] if drive.windows else (start + 0.4 * (until - start), until)
-        z, al = smap.command(vx, limits)
-        seg = {"from_s": start, "to_s": until, "linear_x": vx, "angular_z": wz,
-               "clamped_linear_x": limits.clamp_linear(vx), "clamped_angular_z": limits.clamp_angular(wz),
+        probe = CmdVelFollower(smap, limits, zeta=1.0)
+        probe.command(0.0, vx, wz, vy)
+        z, al, _ = probe.target
+        seg = {"from_s": start, "to_s": until, "linear_x": vx, "linear_y": vy, "angular_z": wz,
+               "clamped_linear_x": limits.clamp_linear(vx), "clamped_linear_y": limits.clamp_lateral(vy),
+               "clamped_angular_z": limits.clamp_angular(wz),
                "zeta": round(z, 4), "alpha": round(al, 4), "window": [round(a, 2), round(b, 2)]}
         if not r.fell or (r.fall_time_s or 0) > b:
             seg.update(trajectory_rates(r, a, b))
@@ -203,6 +207,12 @@ def run_drive(drive: Drive, map_file: str | None = None) -> dict:
         out.update(stop_metrics(r, t_last))
     out["log"] = driven.log[::5]
     return out
+
+
+def _segments(drive: Drive) -> list[tuple[float, float, float, float]]:
+    """The drive's segments as (until_s, linear_x, angular_z, linear_y)."""
+    return [(float(s[0]), float(s[1]), float(s[2]), float(s[3]) if len(s) > 3 else 0.0)
+            for s in drive.segments]
 
 
 def trajectory_rates(r, t0: float, t1: float, chunk_s: float = 1.0) -> dict:

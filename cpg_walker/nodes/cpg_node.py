@@ -181,12 +181,12 @@ class CPGNode(Node):
     def _on_cmd_vel(self, msg: Twist) -> None:
         lin, ang = msg.linear, msg.angular
         try:
-            check_twist(lin.x, ang.z, (lin.y, lin.z, ang.x, ang.y))
+            check_twist(lin.x, ang.z, (lin.z, ang.x, ang.y), linear_y=lin.y)
         except ValueError as exc:
             self.driver.cmd_vel_counts["dropped"] += 1
             self.throttle.warn(self, "/cmd_vel " + reason_key(exc), f"dropped /cmd_vel: {exc}")
             return
-        self.driver.twist(lin.x, ang.z)
+        self.driver.twist(lin.x, ang.z, lin.y)
 
     # ---------------------------------------------------------------- parameters
     def _on_set(self, params) -> SetParametersResult:

@@ -143,10 +143,18 @@ CPG_CMD_VEL_LIMITS = (
     double("cmd_vel.max_linear_x", "largest forward linear.x followed (m/s; larger is clamped)", 0.0, 1.0),
     double("cmd_vel.min_linear_x", "most negative (backward) linear.x followed (m/s; smaller is clamped)",
            -1.0, 0.0),
-    double("cmd_vel.max_angular_z", "largest |angular.z| followed (rad/s; larger is clamped)", 0.0, 1.0),
+    double("cmd_vel.max_angular_z", "largest |angular.z| followed (rad/s; larger is clamped; the range: "
+           "what walked, docs/steering.md)", 0.0, 0.5),
     double("cmd_vel.stand_below", "|linear.x| below this (m/s): stand (alpha 0)", 0.0, 0.1),
     double("cmd_vel.alpha_fall_rate", "the alpha command falls at most this much per sim s (a stop takes "
            "1/rate s)", 0.01, 100.0),
+    double("cmd_vel.max_linear_y", "largest |linear.y| followed (m/s, sideways; larger is clamped; the "
+           "range: what walked, docs/steering.md)", 0.0, 0.034),
+    double("cmd_vel.steer_zeta", "|zeta| at least, while turning or side-stepping", 0.3, 2.0),
+    double("cmd_vel.steer_alpha", "alpha at least, while turning or side-stepping (stepping in place)",
+           0.01, 1.0),
+    double("cmd_vel.angular_z_rate", "the turn rate moves at most this much per sim s (rad/s^2)",
+           0.01, 100.0),
 )
 
 CPG = (

@@ -36,7 +36,8 @@ import numpy as np
 from cpg_walker.errors import InputError
 
 #: keys of a CmdVelLimits (and of cpg_node's ``cmd_vel.<key>`` parameters)
-LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand_below", "alpha_fall_rate")
+LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand_below", "alpha_fall_rate",
+              "max_linear_y", "steer_zeta", "steer_alpha", "angular_z_rate")
 
 
 def _read_yaml(path: str | Path | None, default: str) -> tuple[dict, Path]:
@@ -184,6 +185,13 @@ class SpeedMap:
         """The map's speed (m/s) at (ζ, α)."""
         return (self.forward if zeta > 0 else self.backward).speed_at(zeta, alpha)
 
+    def alpha_at(self, v: float, abs_zeta: float) -> float:
+        """The α (<= 1) that walks at signed speed v at |ζ| = ``abs_zeta``, taking the speed at a given ζ
+        as proportional to α (v(ζ, α) ≈ α·v(ζ, 1): the map's α points at ζ ±1 lie within 0.02 m/s of
+        it above α 0.4)."""
+        full = abs(self.speed(math.copysign(abs_zeta, v), 1.0))
+        return min(abs(v) / full, 1.0) if full > 0 else 1.0
+
     def command(self, linear_x: float, limits: CmdVelLimits) -> tuple[float, float]:
         """(ζ, α) for a linear.x: clamped to the limits, |v| < stand_below -> (1 or −1 by sign, 0)."""
         v = limits.clamp_linear(linear_x)
@@ -206,6 +214,10 @@ class CmdVelLimits:
     max_angular_z: float
     stand_below: float
     alpha_fall_rate: float
+    max_linear_y: float = 0.0
+    steer_zeta: float = 1.5
+    steer_alpha: float = 0.3
+    angular_z_rate: float = 1.0
 
     def __post_init__(self) -> None:
         for k in LIMIT_KEYS:
@@ -219,6 +231,13 @@ class CmdVelLimits:
                              f"{self.max_linear_x} / {self.min_linear_x}")
         if not 0 <= self.max_angular_z <= 1.0:
             raise ValueError(f"cmd_vel.max_angular_z must be in [0, 1] rad/s, got {self.max_angular_z}")
+        if not 0 <= self.max_linear_y <= 0.2:
+            raise ValueError(f"cmd_vel.max_linear_y must be in [0, 0.2] m/s, got {self.max_linear_y}")
+        if not 0.3 <= self.steer_zeta <= 2.0 or not 0 < self.steer_alpha <= 1.0:
+            raise ValueError(f"cmd_vel.steer_zeta must be in [0.3, 2] and cmd_vel.steer_alpha in (0, 1], got "
+                             f"{self.steer_zeta} / {self.steer_alpha}")
+        if not self.angular_z_rate > 0:
+            raise ValueError(f"cmd_vel.angular_z_rate must be > 0 rad/s^2, got {self.angular_z_rate}")
         if not self.stand_below >= 0:
             raise ValueError(f"cmd_vel.stand_below must be >= 0, got {self.stand_below}")
         if not self.alpha_fall_rate > 0:
@@ -243,30 +262,41 @@ class CmdVelLimits:
     def clamp_angular(self, w: float) -> float:
         return min(max(float(w), -self.max_angular_z), self.max_angular_z)
 
+    def clamp_lateral(self, v: float) -> float:
+        return min(max(float(v), -self.max_linear_y), self.max_linear_y)
+
     def as_dict(self) -> dict:
         return asdict(self)
 
 
-def check_twist(linear_x: float, angular_z: float, others: tuple[float, ...] = ()) -> None:
+def check_twist(linear_x: float, angular_z: float, others: tuple[float, ...] = (),
+                linear_y: float = 0.0) -> None:
     """ValueError with the reason for a Twist the robot must not follow: non-finite components (the
     unused ones, ``others``, too: a NaN anywhere says the sender is broken)."""
-    for name, v in (("linear.x", linear_x), ("angular.z", angular_z)):
+    for name, v in (("linear.x", linear_x), ("linear.y", linear_y), ("angular.z", angular_z)):
         if not math.isfinite(v):
             raise ValueError(f"non-finite {name} ({v})")
     if not all(math.isfinite(v) for v in others):
-        raise ValueError("non-finite linear.y/z or angular.x/y")
+        raise ValueError("non-finite linear.z or angular.x/y")
 
 
 @dataclass(frozen=True)
 class CmdVelOutput:
-    """What to command now: ζ, α (HumanoidCPG.set_zeta/set_alpha), turn rate (rad/s) and the state."""
+    """What to command now: ζ, α (HumanoidCPG.set_zeta/set_alpha), turn rate (rad/s), the state and the
+    sideways speed (m/s, the side step's amplitude)."""
 
     zeta: float
     alpha: float
     turn_rate: float
     state: str
+    linear_y: float = 0.0
 
 
+#: |angular.z| (rad/s) from which a Twist with linear.x ~ 0 steps in place to turn
+STEER_MIN_ANGULAR_Z = 0.02
+#: |angular.z| (rad/s) up to which a walk turns at the speed map's (ζ, α) (the hip-yaw amplitude of the
+#: closed loop alone walked it: 0.134-0.140 rad/s at 0.15); faster turns step at cmd_vel.steer_zeta
+GENTLE_TURN = 0.15
 #: Reversal: α command 0 until the applied α is below this, ...
 REVERSE_ALPHA = 0.05
 #: ... then the new ζ, α 0 until the applied ζ is this close (fraction of |new ζ|) to it, ...
@@ -284,7 +314,10 @@ class CmdVelFollower:
         self.zeta = float(zeta) if zeta else 1.0  # the ζ commanded (direction: its sign)
         self.state = "waiting"
         self.last: tuple[float, float, float] | None = None  # (t, linear.x, angular.z) as received
+        self.linear_y = 0.0  # as received
         self.target: tuple[float, float, float] = (self.zeta, 0.0, 0.0)
+        self.target_y = 0.0
+        self._turn_out = 0.0  # the turn rate output (slewed at limits.angular_z_rate)
         self._reversing = False  # direction swapped, waiting for the applied ζ
         self.reverse_via_stop = True  # False: flip ζ at once (measured against; docs/cmd_vel.md)
         self.alpha_rate: float | None = None  # limit on every rise of the α command (per sim s); None: none
@@ -297,21 +330,38 @@ class CmdVelFollower:
         if self.last is not None:
             self._retarget()
 
-    def command(self, t: float, linear_x: float, angular_z: float) -> CmdVelOutput | None:
+    def command(self, t: float, linear_x: float, angular_z: float,
+                linear_y: float = 0.0) -> CmdVelOutput | None:
         """A Twist at sim time t (ValueError for a bad one: nothing changes)."""
-        check_twist(linear_x, angular_z)
+        check_twist(linear_x, angular_z, linear_y=linear_y)
         if not math.isfinite(t):
             raise ValueError(f"non-finite command time {t}")
         self.last = (float(t), float(linear_x), float(angular_z))
+        self.linear_y = float(linear_y)
         self._retarget()
         return None
 
     def _retarget(self) -> None:
+        """The target (ζ, α, turn rate) and sideways speed of the last Twist. A turn faster than
+        GENTLE_TURN, or a sideways speed of at least stand_below, steps at |ζ| >= steer_zeta and α >=
+        steer_alpha, its forward speed kept by the α at that ζ (``SpeedMap.alpha_at``); with |linear.x|
+        below stand_below a turn of at least STEER_MIN_ANGULAR_Z (or a side step) steps in place at
+        (±steer_zeta, steer_alpha). Gentler turns walk at the speed map's (ζ, α)."""
         _, vx, wz = self.last  # type: ignore[misc]
-        z, a = self.map.command(vx, self.limits)
+        lim = self.limits
+        wz, vy = lim.clamp_angular(wz), lim.clamp_lateral(self.linear_y)
+        side = abs(vy) >= max(lim.stand_below, 1e-9)
+        z, a = self.map.command(vx, lim)
         if a == 0.0:
-            z = self.zeta  # standing: keep the walking direction
-        self.target = (z, a, self.limits.clamp_angular(wz) if a > 0 else 0.0)
+            z = self.zeta  # standing (or stepping in place): keep the walking direction
+            if side or abs(wz) >= STEER_MIN_ANGULAR_Z:
+                z, a = math.copysign(lim.steer_zeta, z), lim.steer_alpha
+        elif (side or abs(wz) > GENTLE_TURN) and abs(z) < lim.steer_zeta:
+            v = lim.clamp_linear(vx)
+            z = math.copysign(lim.steer_zeta, v)
+            a = max(self.map.alpha_at(v, lim.steer_zeta), lim.steer_alpha)
+        self.target = (z, a, wz if a > 0 else 0.0)
+        self.target_y = vy if a > 0 else 0.0
 
     def update(self, t: float, applied_zeta: float, applied_alpha: float) -> CmdVelOutput | None:
         """What to command at sim time t, given the controller's applied (filtered) ζ and α; None while
@@ -336,7 +386,8 @@ class CmdVelFollower:
                 return self._out(t, z, 0.0, 0.0)
             self._reversing, self._ramp = False, True
         self.zeta = z
-        self.state = "following"
+        in_place = self.map.command(self.last[1], self.limits)[1] == 0.0
+        self.state = "stepping in place" if in_place else "following"
         rate = self.alpha_rate
         if rate is None and self._ramp:
             rate = self.reverse_alpha_rate
@@ -347,13 +398,16 @@ class CmdVelFollower:
                 self.state = "ramping"
             else:
                 self._ramp = False
-        return self._out(t, z, a, w)
+        return self._out(t, z, a, w, self.target_y)
 
-    def _out(self, t: float, z: float, a: float, w: float) -> CmdVelOutput:
+    def _out(self, t: float, z: float, a: float, w: float, vy: float = 0.0) -> CmdVelOutput:
+        dt = max(t - self._t_prev, 0.0)
         if a < self._alpha_out:  # the α command falls at most limits.alpha_fall_rate per sim s
-            a = max(a, self._alpha_out - self.limits.alpha_fall_rate * max(t - self._t_prev, 0.0))
-        self._t_prev, self._alpha_out = t, a
-        return CmdVelOutput(z, a, w, self.state)
+            a = max(a, self._alpha_out - self.limits.alpha_fall_rate * dt)
+        step = self.limits.angular_z_rate * dt  # the turn rate moves at most angular_z_rate per sim s
+        w = min(max(w, self._turn_out - step), self._turn_out + step)
+        self._t_prev, self._alpha_out, self._turn_out = t, a, w
+        return CmdVelOutput(z, a, w, self.state, vy)
 
 
 def apply_output(source, out: CmdVelOutput) -> None:
@@ -366,6 +420,7 @@ def apply_output(source, out: CmdVelOutput) -> None:
     fb = getattr(source, "fb", None)
     if fb is None:
         return
+    source.side_step = out.linear_y
     if out.turn_rate != 0.0:
         cfg = fb.cfg
         fb.heading_window_rad = cfg.heading_limit_rad / cfg.heading_gain if cfg.heading_gain > 0 else 0.0

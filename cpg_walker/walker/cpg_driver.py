@@ -298,7 +298,7 @@ class CPGDriver:
             fb.hold_heading()
         fb.set_turn_rate(rate)
 
-    def twist(self, linear_x: float, angular_z: float) -> None:
+    def twist(self, linear_x: float, angular_z: float, linear_y: float = 0.0) -> None:
         """A validated /cmd_vel message, timed by the newest tick (a Twist has no stamp)."""
         if not self.follow_cmd_vel:
             self.cmd_vel_counts["ignored"] += 1
@@ -309,7 +309,7 @@ class CPGDriver:
             self.out.log("info", f"following /cmd_vel from sim {t:.3f} s (timeout "
                          f"{self.cmd.limits.timeout:g} sim s)")
         self.cmd_override = False
-        self.cmd.command(t, float(linear_x), float(angular_z))
+        self.cmd.command(t, float(linear_x), float(angular_z), float(linear_y))
 
     def _cmd_vel_tick(self, t_ns: int) -> None:
         """Apply the follower's output for tick t_ns (once the CPG has taken over)."""
@@ -324,14 +324,10 @@ class CPGDriver:
         want = self.cmd.limits.clamp_angular(self.cmd.last[2])
         self.cmd_turn = reason if reason and want != 0.0 else "ok"
         if reason and out.turn_rate != 0.0:
-            out = CmdVelOutput(out.zeta, out.alpha, 0.0, out.state)
+            out = CmdVelOutput(out.zeta, out.alpha, 0.0, out.state, out.linear_y)
         if reason and want != 0.0:
             self.out.log("warn", f"/cmd_vel angular.z {want:g} rad/s cannot turn the robot: {reason}",
                          "/cmd_vel turn")
-        if want != 0.0 and out.state == "standing":
-            self.cmd_turn = "cannot turn in place (stands: |linear.x| < cmd_vel.stand_below)"
-            self.out.log("warn", f"/cmd_vel angular.z {want:g} rad/s with linear.x ~ 0: the robot turns only "
-                         "while stepping; it stands", "/cmd_vel turn in place")
         apply_output(self.source, out)
         key = (out.state, self.cmd.target)  # not each tick of an alpha ramp: a new state or command
         if prev is None or key != self._cmd_logged:

@@ -38,8 +38,9 @@ How we read the paper:
   other phases). ``heading``: keeps the IMU yaw on a reference (the yaw
   when feedback takes over, or the first observed one: ``heading_reference``; advanced by the commanded
   ``turn_rate``) with an antisymmetric hip-yaw
-  oscillation q_yaw,R = −q_yaw,L = u·cos(θ_ref − φ_TD), u = heading_gain·(filtered yaw error): each
-  stance hip turns the pelvis over its planted foot by ≈ 2u per step. ``ankle``: an ankle strategy on
+  oscillation q_yaw,R = −q_yaw,L = u·cos(θ_ref − φ_TD), u = heading_gain·(filtered yaw error) plus the
+  commanded turn's feedforward c·ω·T/4 (``heading_amplitude``): each stance hip turns the pelvis over its
+  planted foot by ≈ 2u per step. ``ankle``: an ankle strategy on
   the IMU — both ankles' pitch (Ankle1) and roll (Ankle2) targets offset by
   Δq_pitch = k_p·ψ_pend + k_pd·ω_y and Δq_roll = k_r·ψ_lat + k_rd·ω_x (ψ the filtered tilt, ω the chest's
   angular velocity), clipped to ``ankle_limit_rad``: a forward lean or pitch rate plantar-flexes, a right
@@ -128,7 +129,14 @@ class FeedbackConfig:
     reset_min_alpha: float  # no reset_both while the applied α is below this (shorter steps)
     # ours ("heading")
     heading_gain: float  # hip-yaw amplitude u (rad) per rad of heading error
-    heading_limit_rad: float  # |u| clip
+    heading_limit_rad: float  # |u| clip of the closed loop
+    turn_feedforward: float  # c of the turn's feedforward u_ff = c·ω·T/4 (T the stride period)
+    hip_yaw_limit_rad: float  # |u_fb + u_ff| clip
+    # the side step (/cmd_vel linear.y; not a feedback pathway: a command's hip-roll oscillation)
+    side_step_gain: float  # hip-roll amplitude (rad) per (m/s of linear.y × s of stride period)
+    side_step_limit_rad: float  # |amplitude| clip
+    side_step_phase_rad: float  # the oscillation's phase after the heading pathway's cos(θ − φ_TD)
+    side_step_rate: float  # rad per sim s the amplitude moves at most
     heading_time_constant_s: float  # low-pass on the heading error (the gait's own yaw sway)
     heading_reference: str  # "handover": the yaw when feedback takes over | "start": the first observed yaw
     # ours ("ankle"): both ankles' pitch/roll target offsets from the chest's tilt and angular velocity
@@ -166,7 +174,8 @@ class FeedbackConfig:
         for name in ("gain_scale", "g_limit", "tilt_time_constant_s", "heading_gain", "heading_limit_rad",
                      "ankle_rate_time_constant_s", "ankle_max_sample_age_s", "ankle_fade_s",
                      "heading_time_constant_s", "reset_min_abs_zeta", "reset_min_alpha", "free_leg_gain",
-                     "free_leg_stance_gain", "free_leg_threshold_rad", "free_leg_unloaded_n"):
+                     "free_leg_stance_gain", "free_leg_threshold_rad", "free_leg_unloaded_n",
+                     "turn_feedforward", "side_step_gain", "side_step_rate"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 <= self.ankle_limit_rad <= 0.3:
@@ -180,9 +189,15 @@ class FeedbackConfig:
                              f"got {self.free_leg_limit_rad}")
         if not 0.0 < self.free_leg_max_alpha <= 1.0:
             raise InputError(f"free_leg_max_alpha must be in (0, 1], got {self.free_leg_max_alpha}")
-        if self.heading_limit_rad > 0.5:
-            raise InputError(f"heading_limit_rad must be <= 0.5 rad (hip-yaw offsets), "
-                             f"got {self.heading_limit_rad}")
+        if not 0.0 <= self.side_step_limit_rad <= 0.3:
+            raise InputError(f"side_step_limit_rad must be in [0, 0.3] rad (hip-roll offsets), "
+                             f"got {self.side_step_limit_rad}")
+        if abs(self.side_step_phase_rad) > math.pi:
+            raise InputError(f"side_step_phase_rad must be in [-pi, pi], got {self.side_step_phase_rad}")
+        for name in ("heading_limit_rad", "hip_yaw_limit_rad"):
+            if not 0.0 <= getattr(self, name) <= 0.5:
+                raise InputError(f"{name} must be in [0, 0.5] rad (hip-yaw offsets), "
+                                 f"got {getattr(self, name)}")
         if abs(self.lateral_sign) != 1.0:
             raise InputError(f"lateral_sign must be +1 or -1, got {self.lateral_sign}")
         for name in ("reset_phase_rad", "reset_phase_backward_rad"):
@@ -517,9 +532,17 @@ class FeedbackController:
         v = w * min(c.free_leg_stance_gain * excess, c.free_leg_limit_rad)
         return (u, -v) if upper == 0 else (v, -u)
 
-    def heading_amplitude(self) -> float:
-        """u (rad) of the heading pathway's hip-yaw oscillation (0 without it or before the capture)."""
+    def heading_amplitude(self, stride_s: float = 0.0) -> float:
+        """u (rad) of the heading pathway's hip-yaw oscillation (0 without it or before the capture): the
+        closed loop u_fb = heading_gain·e (|u_fb| <= heading_limit_rad) plus the commanded turn's
+        feedforward u_ff = turn_feedforward·ω·T/4 (T = ``stride_s``, the stride period: each stance hip
+        turns the pelvis by 2u per step, two steps per stride, so u = ω·T/4 without slip; c > 1 makes up
+        the measured slip), the sum clipped to hip_yaw_limit_rad."""
         if "heading" not in self.pathways or self.heading_ref is None:
             return 0.0
-        lim = self.cfg.heading_limit_rad
-        return self._weight * min(max(self.cfg.heading_gain * self.heading_error, -lim), lim)
+        cfg = self.cfg
+        lim = cfg.heading_limit_rad
+        u = min(max(cfg.heading_gain * self.heading_error, -lim), lim)
+        u += cfg.turn_feedforward * self.turn_rate * stride_s / 4.0
+        lim = cfg.hip_yaw_limit_rad
+        return self._weight * min(max(u, -lim), lim)

@@ -37,6 +37,8 @@ ANKLE_PITCH = np.array([JOINT_NAMES.index(j) for j in ANKLE_PITCH_JOINTS])
 ANKLE_ROLL = np.array([JOINT_NAMES.index(j) for j in ANKLE_ROLL_JOINTS])
 HIP_ROLL = np.array([JOINT_NAMES.index(j) for j in HIP_ROLL_JOINTS])
 ANKLE_HOLD_S = 0.1
+#: |ζ| below which the turn's feedforward takes the stride period as at this ζ (no stepping rhythm there)
+MIN_STRIDE_ZETA = 0.3
 
 
 class CPGGaitSource:
@@ -322,6 +324,9 @@ class FeedbackGaitSource(CPGGaitSource):
         self._yaw_idx = np.array([JOINT_NAMES.index(j) for j in HIP_YAW])
         self._ankle = (0.0, 0.0)  # the ankle pathway's (pitch, roll) offsets
         self._free_leg = (0.0, 0.0)  # the free_leg pathway's (left, right) hip roll offsets
+        self.side_step = 0.0  # m/s commanded sideways (/cmd_vel linear.y)
+        self._side_v = 0.0  # rad, the side step's hip-roll amplitude (slewed)
+        self._t_obs: float | None = None
 
     def observe(self, t: float, quat_wxyz: np.ndarray, gyro: np.ndarray, loads: tuple[float, float],
                 age_s: float = 0.0) -> None:
@@ -344,12 +349,24 @@ class FeedbackGaitSource(CPGGaitSource):
         for target, strength in fb.reset_events(z, self.ctrl.alpha):
             d = phase_reset(st, self.ctrl.net.omega, target, strength=strength)
             fb.resets.append((t, d))
-        self._yaw_u = fb.heading_amplitude()
+        stride_s = self.ctrl.period / max(abs(z), MIN_STRIDE_ZETA)
+        self._yaw_u = fb.heading_amplitude(stride_s)
+        self._side_step_update(t, stride_s)
         self._ankle = fb.ankle_offsets()
         self._free_leg = fb.free_leg_offsets(self.ctrl.alpha)
         if self.keep_traces and t >= self._next_trace - 1e-9:  # one per trace_dt, whatever the tick rate
             self.g_trace.append((t, *fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
             self._next_trace = t + self.trace_dt
+
+    def _side_step_update(self, t: float, stride_s: float) -> None:
+        """Move the side step's amplitude toward side_step_gain·linear.y·T (clipped), at side_step_rate."""
+        cfg = self.fb.cfg
+        lim = cfg.side_step_limit_rad
+        want = min(max(cfg.side_step_gain * self.side_step * stride_s, -lim), lim) * self.fb.weight
+        dt = 0.0 if self._t_obs is None else max(t - self._t_obs, 0.0)
+        self._t_obs = t
+        step = cfg.side_step_rate * dt
+        self._side_v = min(max(want, self._side_v - step), self._side_v + step)
 
     def _closes_loop(self) -> bool:
         return bool(self.fb.pathways) and self.fb.weight > 0.0
@@ -365,12 +382,14 @@ class FeedbackGaitSource(CPGGaitSource):
         self.active_from = self.handover + self.blend
         self._yaw_u = 0.0
         self._ankle = self._free_leg = (0.0, 0.0)
+        self._side_v = 0.0
 
     def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         q, qd = super().targets(t)
         if self._offsets_act() and t >= self.active_from:
             q, qd = q.copy(), qd.copy()
             self._add_hip_yaw(q, qd, 0.0)
+            self._add_side_step(q, qd, 0.0)
             q[ANKLE_PITCH] += self._ankle[0]
             q[ANKLE_ROLL] += self._ankle[1]
             q[HIP_ROLL] += self._free_leg
@@ -386,6 +405,7 @@ class FeedbackGaitSource(CPGGaitSource):
                 ahead = max(float(times[k]) - self._t_net, 0.0)
                 scale = 1.0 if fade is None else float(fade[k])
                 self._add_hip_yaw(q[k], qd[k], ahead, scale)
+                self._add_side_step(q[k], qd[k], ahead, scale)
                 hold = scale * math.exp(-ahead / ANKLE_HOLD_S)  # a reaction to now: it dies out ahead
                 q[k, ANKLE_PITCH] += hold * self._ankle[0]
                 q[k, ANKLE_ROLL] += hold * self._ankle[1]
@@ -394,15 +414,34 @@ class FeedbackGaitSource(CPGGaitSource):
 
     def _offsets_act(self) -> bool:
         """Any of the heading, ankle and free_leg pathways' joint offsets is non-zero now."""
-        return self._yaw_u != 0.0 or self._ankle != (0.0, 0.0) or self._free_leg != (0.0, 0.0)
+        return (self._yaw_u != 0.0 or self._side_v != 0.0 or self._ankle != (0.0, 0.0)
+                or self._free_leg != (0.0, 0.0))
+
+    def _reference_phase(self, ahead_s: float) -> tuple[float, float]:
+        """(θ, θ̇) of the right Hip2 main oscillator ``ahead_s`` from now (at the current frequency)."""
+        net = self.ctrl.net
+        st = net.state
+        w = float(net.frequencies()[RIGHT_HIP2, 0])
+        return phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0]) + w * ahead_s, w
 
     def _add_hip_yaw(self, q: np.ndarray, qd: np.ndarray, ahead_s: float, scale: float = 1.0) -> None:
         if self._yaw_u == 0.0:
             return
-        net = self.ctrl.net
-        st = net.state
-        w = float(net.frequencies()[RIGHT_HIP2, 0])
-        theta = phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0]) + w * ahead_s
+        theta, w = self._reference_phase(ahead_s)
         dq, dqd = hip_yaw_offsets(scale * self._yaw_u, theta, touchdown_phase(self.ctrl.zeta, self.fb.cfg), w)
         q[self._yaw_idx] += dq
         qd[self._yaw_idx] += dqd
+
+    def _add_side_step(self, q: np.ndarray, qd: np.ndarray, ahead_s: float, scale: float = 1.0) -> None:
+        """The side step: hip rolls q_R = −q_L = v·cos(θ − φ_TD + side_step_phase_rad), the ankle rolls
+        opposite (soles level)."""
+        if self._side_v == 0.0:
+            return
+        theta, w = self._reference_phase(ahead_s)
+        cfg = self.fb.cfg
+        dq, dqd = hip_yaw_offsets(scale * self._side_v, theta + cfg.side_step_phase_rad,
+                                  touchdown_phase(self.ctrl.zeta, cfg), w)
+        q[HIP_ROLL] += dq
+        qd[HIP_ROLL] += dqd
+        q[ANKLE_ROLL] -= dq
+        qd[ANKLE_ROLL] -= dqd
