@@ -32,6 +32,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --graph: drive the graph already running on --domain-id (or ROS_DOMAIN_ID)")
     d.add_argument("--domain-id", type=domain_id, default=None, metavar="N",
                    help="with --graph: the DDS domain")
+    d.add_argument("--plan", choices=("drive", "steer"), default="drive",
+                   help="with --graph: drive (forward, left, right) or steer (turn in place 0.5 rad/s 10 s, "
+                        "side-step 0.05 m/s 20 s, forward 0.15 m/s 20 s)")
+    d.add_argument("--pacing", choices=("lockstep", "realtime"), default="lockstep",
+                   help="with --graph (not --attach): the started graph's pacing")
     d.set_defaults(func=_drive)
 
 
@@ -54,7 +59,7 @@ def _drive(args: argparse.Namespace) -> int:
     if args.graph:
         from cpg_walker.experiments.cmd_vel_graph import drive_graph
 
-        res = drive_graph(args.out, args.domain_id, args.attach)
+        res = drive_graph(args.out, args.domain_id, args.attach, plan=args.plan, pacing=args.pacing)
         print(open(f"{args.out}/drive_graph.md", encoding="utf-8").read())
         return report_fall("drive-check", [fall_line("drive-check", res.get("fell_at_s"),
                                                      what="driven through the graph")] if res["fell"] else [])

@@ -94,6 +94,8 @@ class Drive:
     alpha_rate: float | None = None  # the follower's limit on every rise of the α command (per sim s)
     reverse_alpha_rate: float | None = REVERSE_ALPHA_RATE  # ... on the rise after a reversal
     alpha_fall_rate: float | None = None  # cmd_vel.alpha_fall_rate (None: config/cpg.yaml's)
+    governed: bool = True  # the governor between the follower and the CPG, as in cpg_node
+    ankle: bool = True  # the ankle pathway may act (cpg_node: in lockstep; realtime: ankle_in_realtime)
 
 
 def drive_set(quick: bool = False) -> list[Drive]:
@@ -164,6 +166,7 @@ def run_drive(drive: Drive, map_file: str | None = None) -> dict:
     from cpg_walker.robot.pid import PidLaw
     from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
     from cpg_walker.walker.gait_source import FeedbackGaitSource
+    from cpg_walker.walker.governor import GovernorConfig
     from cpg_walker.walker.loop import run_replay
 
     smap = SpeedMap.load(map_file or default_map_file())
@@ -171,7 +174,8 @@ def run_drive(drive: Drive, map_file: str | None = None) -> dict:
                                   else {"alpha_fall_rate": drive.alpha_fall_rate}))
     ctrl = _controller()
     fb = FeedbackController(FeedbackConfig.load())
-    src = FeedbackGaitSource(ctrl, fb)
+    fb.ankle_allowed = drive.ankle
+    src = FeedbackGaitSource(ctrl, fb, governor=GovernorConfig.load() if drive.governed else None)
     follower = CmdVelFollower(smap, limits, zeta=1.0)
     follower.reverse_via_stop = drive.reverse_via_stop
     follower.alpha_rate = drive.alpha_rate

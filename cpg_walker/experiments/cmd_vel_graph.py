@@ -25,11 +25,15 @@ import numpy as np
 from cpg_walker.errors import InputError
 from cpg_walker.nodes import interface as ifc
 
-#: (name, duration s, linear.x, angular.z, settle s) after the start, then ``STOP_S`` without commands;
-#: each window's first ``settle`` s are left out of the measurement (a turn builds up over ~8 s: the
-#: heading pathway's P law on a low-passed error has to lead the yaw by ~0.5 rad first).
+#: (name, duration s, linear.x, angular.z, settle s[, linear.y]) after the start, then ``STOP_S`` without
+#: commands; each window's first ``settle`` s are left out of the rates (the gait changes first); the
+#: turned angle and the sideways displacement are over the whole window.
 PLAN = (("forward", 12.0, 0.085, 0.0, 4.0), ("left", 20.0, 0.085, 0.1, 8.0),
         ("right", 20.0, 0.085, -0.1, 8.0))
+#: Steering like a walking base: turn in place, side-step, then forward at (or clamped to) 0.15 m/s.
+STEER_PLAN = (("turn in place", 10.0, 0.0, 0.5, 3.0), ("side step", 20.0, 0.0, 0.0, 6.0, 0.05),
+              ("forward", 20.0, 0.15, 0.0, 8.0))
+PLANS = {"drive": PLAN, "steer": STEER_PLAN}
 STOP_S = 8.0
 #: A fresh graph: the first Twist at this sim time (the CPG has taken over the recording at ~6.6 s).
 START_S = 8.0
@@ -43,8 +47,9 @@ def _yaw(q) -> float:
 
 
 def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = False,
-                wall_limit_s: float = 1800.0) -> dict:
-    """Run the plan (module docstring) against a graph; write and return the measurements."""
+                wall_limit_s: float = 1800.0, plan: str = "drive", pacing: str = "lockstep") -> dict:
+    """Run a plan (``PLANS``: "drive" the module docstring's, "steer" STEER_PLAN) against a graph started
+    with ``pacing`` (or attached to); write and return the measurements."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
@@ -60,10 +65,13 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
         env = env_domain_id()
         domain_id = 0 if env is None else env
     domain = quiet_domain_id() if domain_id is None else resolve_domain(int(domain_id))[0]  # 0..232
-    total = sum(p[1] for p in PLAN) + STOP_S
+    if plan not in PLANS:
+        raise InputError(f"unknown drive plan {plan!r}; choose from {sorted(PLANS)}")
+    steps = PLANS[plan]
+    total = sum(p[1] for p in steps) + STOP_S
     proc = None
     if not attach:
-        cmd = [sys.executable, "-m", "cpg_walker.cli.main", "graph", "--pacing", "lockstep", "--duration",
+        cmd = [sys.executable, "-m", "cpg_walker.cli.main", "graph", "--pacing", pacing, "--duration",
                str(START_S + total), "--domain-id", str(domain), "--log-dir", str(out / "logs")]
         proc = subprocess.Popen(cmd, env=isolated_env(domain), stdout=open(out / "graph.log", "w"),
                                 stderr=subprocess.STDOUT, start_new_session=True)
@@ -120,12 +128,13 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
             if t >= t0 + total:
                 break
             if t >= next_pub:
-                seg = _segment(t - t0)
+                seg = _segment(steps, t - t0)
                 if seg is not None:
                     msg = Twist()
                     msg.linear.x, msg.angular.z = seg[2], seg[3]
+                    msg.linear.y = seg[5] if len(seg) > 5 else 0.0
                     pub.publish(msg)
-                    sent.append((round(t, 3), seg[2], seg[3]))
+                    sent.append((round(t, 3), seg[2], seg[3], msg.linear.y))
                 next_pub += 1.0 / RATE_HZ
             if time.monotonic() - last_report > 5.0:
                 print(f"drive-check --graph: sim {t:.1f} / {t0 + total:.1f} s", file=sys.stderr, flush=True)
@@ -148,44 +157,65 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     if stalled:
         raise InputError(f"/odom/ground_truth on DDS domain {domain} stopped for {NO_ODOM_S:g} s at sim "
                          f"{odom[-1][0]:.1f} s, before the plan's end ({where})")
-    res = measure(np.array(odom), t0, sent, cmd_state)
+    res = measure(np.array(odom), t0, sent, cmd_state, steps)
     res["fell"] = bool(fallen)
     res["fell_at_s"] = round(fallen[0], 2) if fallen else None
-    res.update(domain_id=domain, attached=attach, plan=[list(p) for p in PLAN], stop_s=STOP_S,
-               first_command_s=t0)
+    res.update(domain_id=domain, attached=attach, plan_name=plan, plan=[list(p) for p in steps],
+               stop_s=STOP_S, first_command_s=t0, pacing=None if attach else pacing)
     (out / "drive_graph.json").write_text(json.dumps(res, indent=2) + "\n")
     (out / "drive_graph.md").write_text(markdown(res))
     return res
 
 
-def _segment(dt: float):
+def _segment(steps: tuple, dt: float):
     t = 0.0
-    for p in PLAN:
+    for p in steps:
         if t <= dt < t + p[1]:
             return p
         t += p[1]
     return None
 
 
-def measure(odom: np.ndarray, t0: float, sent: list, cmd_state: list) -> dict:
-    """Per plan window (after SETTLE_S): forward speed, turn rate; the stop after the last command."""
+def _moved(t: np.ndarray, xy: np.ndarray, yaw: np.ndarray, a: float, b: float) -> tuple[float, float]:
+    """(forward, sideways) displacement between sim times a and b: 1 s pieces, each along (and across)
+    its mean heading."""
+    fwd = side = 0.0
+    edges = np.append(np.arange(a, b - 1e-9, 1.0), b)
+    for c0, c1 in itertools.pairwise(edges):
+        i0, i1 = np.searchsorted(t, c0), min(np.searchsorted(t, c1), len(t) - 1)
+        h = float(np.mean(yaw[i0:i1 + 1]))
+        d = xy[i1] - xy[i0]
+        fwd += float(d @ [math.cos(h), math.sin(h)])
+        side += float(d @ [-math.sin(h), math.cos(h)])
+    return fwd, side
+
+
+def _at(t: np.ndarray, v: np.ndarray, s: float):
+    return v[min(int(np.searchsorted(t, s)), len(t) - 1)]
+
+
+def measure(odom: np.ndarray, t0: float, sent: list, cmd_state: list, steps: tuple = PLAN) -> dict:
+    """Per plan window: forward and sideways speed and turn rate after its settle time, the angle turned
+    and the sideways displacement over all of it; the stop after the last command."""
     t, xy, yaw = odom[:, 0], odom[:, 1:3], np.unwrap(odom[:, 3])
     rows = []
     start = t0
-    for name, dur, vx, wz, settle in PLAN:
+    for name, dur, vx, wz, settle, *more in steps:
+        vy = more[0] if more else 0.0
+        whole = _moved(t, xy, yaw, start, start + dur)
+        turned = float(_at(t, yaw, start + dur) - _at(t, yaw, start))
         a, b = start + settle, start + dur
         sel = (t >= a) & (t <= b)
         rate = float(np.polyfit(t[sel], yaw[sel], 1)[0]) if sel.sum() > 10 else float("nan")
-        fwd = 0.0
-        edges = np.arange(a, b + 1e-9, 1.0)
-        for c0, c1 in itertools.pairwise(edges):
-            i0, i1 = np.searchsorted(t, c0), min(np.searchsorted(t, c1), len(t) - 1)
-            h = float(np.mean(yaw[i0:i1 + 1]))
-            fwd += float((xy[i1] - xy[i0]) @ [math.cos(h), math.sin(h)])
-        span = float(edges[-1] - edges[0])
+        fwd, side = _moved(t, xy, yaw, a, b)
+        span = b - a
         rows.append({"window": name, "from_s": round(a, 2), "to_s": round(b, 2), "linear_x": vx,
-                     "angular_z": wz, "speed_mps": round(fwd / span, 4), "turn_rate_rad_s": round(rate, 4),
-                     "turn_rate_deg_s": round(math.degrees(rate), 2)})
+                     "linear_y": vy, "angular_z": wz, "speed_mps": round(fwd / span, 4),
+                     "lateral_mps": round(side / span, 4), "turn_rate_rad_s": round(rate, 4),
+                     "turn_rate_deg_s": round(math.degrees(rate), 2),
+                     "whole": {"from_s": round(start, 2), "to_s": round(start + dur, 2),
+                               "turned_rad": round(turned, 3), "forward_m": round(whole[0], 3),
+                               "sideways_m": round(whole[1], 3)}})
         start += dur
     t_last = sent[-1][0]
     stopped = None
@@ -202,12 +232,16 @@ def measure(odom: np.ndarray, t0: float, sent: list, cmd_state: list) -> dict:
 
 
 def markdown(res: dict) -> str:
-    lines = ["| window (sim s) | linear.x | angular.z | forward speed m/s | turn rate rad/s (°/s) |",
-             "|---|---|---|---|---|"]
+    lines = ["| window (sim s) | linear.x | linear.y | angular.z | forward m/s | sideways m/s | turn rate "
+             "rad/s (°/s) | whole window: turned rad, forward m, sideways m |",
+             "|---|---|---|---|---|---|---|---|"]
     for w in res["windows"]:
+        wh = w.get("whole", {})
         lines.append(f"| {w['window']} {w['from_s']:g}–{w['to_s']:g} | {w['linear_x']:+g} | "
-                     f"{w['angular_z']:+g} | {w['speed_mps']:+.3f} | {w['turn_rate_rad_s']:+.3f} "
-                     f"({w['turn_rate_deg_s']:+.1f}) |")
+                     f"{w.get('linear_y', 0.0):+g} | {w['angular_z']:+g} | {w['speed_mps']:+.3f} | "
+                     f"{w.get('lateral_mps', 0.0):+.3f} | {w['turn_rate_rad_s']:+.3f} "
+                     f"({w['turn_rate_deg_s']:+.1f}) | {wh.get('turned_rad', 0):+.2f}, "
+                     f"{wh.get('forward_m', 0):+.2f}, {wh.get('sideways_m', 0):+.2f} |")
     lines.append("")
     lines.append(f"Last command at sim {res['last_command_s']:.2f} s; cpg_node timed out "
                  f"{res['timed_out_after_s']} s after it; the base moved < 1 cm/s from "

@@ -297,6 +297,10 @@ STEER_MIN_ANGULAR_Z = 0.02
 #: |angular.z| (rad/s) up to which a walk turns at the speed map's (ζ, α) (the hip-yaw amplitude of the
 #: closed loop alone walked it: 0.134-0.140 rad/s at 0.15); faster turns step at cmd_vel.steer_zeta
 GENTLE_TURN = 0.15
+#: ... and only once the applied α is within this of the steering α, as the side step (a fast turn on
+#: long steps fell: in-process, the governed walk at α 1 turned in place at 0.5 rad/s fell 1.8 s after
+#: the command; a side step without the ankle pathway 2.4 s after it)
+TURN_ALPHA_TOLERANCE = 0.1
 #: Reversal: α command 0 until the applied α is below this, ...
 REVERSE_ALPHA = 0.05
 #: ... then the new ζ, α 0 until the applied ζ is this close (fraction of |new ζ|) to it, ...
@@ -385,6 +389,11 @@ class CmdVelFollower:
                 self.state = "reversing"  # the new ζ first, then step again
                 return self._out(t, z, 0.0, 0.0)
             self._reversing, self._ramp = False, True
+        vy = self.target_y
+        if applied_alpha > a + TURN_ALPHA_TOLERANCE:  # a fast turn or a side step waits for the steps
+            vy = 0.0
+            if abs(w) > GENTLE_TURN:
+                w = math.copysign(GENTLE_TURN, w)
         self.zeta = z
         in_place = self.map.command(self.last[1], self.limits)[1] == 0.0
         self.state = "stepping in place" if in_place else "following"
@@ -398,7 +407,7 @@ class CmdVelFollower:
                 self.state = "ramping"
             else:
                 self._ramp = False
-        return self._out(t, z, a, w, self.target_y)
+        return self._out(t, z, a, w, vy)
 
     def _out(self, t: float, z: float, a: float, w: float, vy: float = 0.0) -> CmdVelOutput:
         dt = max(t - self._t_prev, 0.0)
