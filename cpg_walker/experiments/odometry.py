@@ -7,7 +7,8 @@ Reported per walk: the planar position error (final and largest) as % of the dis
 error (final and largest) in degrees and as % of the angle turned, the height error. Distance walked and
 angle turned are the ground truth's, summed stride by stride (from one left touchdown to the next: the
 torso's sway within a stride, a few cm and degrees each way, is not walking or turning).
-``cpg-walker odometry --out DIR`` writes DIR/odometry.json and DIR/odometry.md.
+``measure(DIR)`` writes DIR/odometry.json and DIR/odometry.md (``python -c "from
+cpg_walker.experiments.odometry import measure; measure('DIR', jobs=2)"``).
 """
 
 from __future__ import annotations
@@ -146,7 +147,7 @@ def measure(out: str | Path | None = None, duration_s: float = 60.0, jobs: int =
 
     cfg = OdometryConfig.load() if config is None else config
     runs = run_many(partial(run_odometry, config=cfg), drives(duration_s), jobs=jobs)
-    report = {"command": f"cpg-walker odometry --out DIR --duration {duration_s:g}",
+    report = {"command": f"cpg_walker.experiments.odometry.measure(DIR, duration_s={duration_s:g})",
               "target_pct": 5.0, "config": {k: getattr(cfg, k) for k in CONFIG_KEYS}, "runs": runs}
     if out is not None:
         out = Path(out)
