@@ -16,6 +16,7 @@ NODES: dict[str, str] = {
     "recorder_node": "cpg_walker.nodes.recorder_node:main",
     "foxglove_node": "cpg_walker.nodes.foxglove_node:main",
     "relay_node": "cpg_walker.nodes.relay_node:main",
+    "odom_node": "cpg_walker.nodes.odom_node:main",
 }
 TOOLS = {
     "cpg-walker": "cpg_walker.cli.main:main",

@@ -1,4 +1,4 @@
-"""Launch the CPG walk on a ROS 2 install: sim_node + pid_node + cpg_node + robot_state_publisher
+"""Launch the CPG walk on a ROS 2 install: sim_node + pid_node + cpg_node + odom_node + robot_state_publisher
 (+ ``ros2 bag record`` with ``record:=true``, + RViz with ``rviz:=true``). Example:
 ``ros2 launch cpg_walker walk.launch.py pacing:=lockstep zeta:=1.2 alpha:=1.1 feedback:=false record:=true``.
 
@@ -6,9 +6,10 @@ Each of our nodes gets its parameters file from the package's share/config (conf
 every value's one home, e.g. zeta, alpha and feedback in cpg.yaml); a launch argument given on the
 command line overrides the file's value (left empty, the file's stands). robot_state_publisher gets the
 URDF generated from the MJCF (share/cpg_walker/urdf/hoap2.urdf), publishes it on /robot_description and
-turns /joint_states into /tf and /tf_static; sim_node adds odom -> base_link on /tf (so it does not publish
-/robot_description itself here). Without ROS's launch tools (a pip install), use ``cpg-walker graph`` /
-``cpg-walker walk``.
+turns /joint_states into /tf and /tf_static (so sim_node does not publish /robot_description itself here);
+odom_node estimates odom -> base_link (leg odometry, /odom) and puts it on /tf, so sim_node's ground truth
+stays on /odom/ground_truth only (its publish_tf false: REP-105, one parent per frame). Without ROS's
+launch tools (a pip install), use ``cpg-walker graph`` / ``cpg-walker walk``.
 """
 
 import os
@@ -18,7 +19,14 @@ from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction
 from launch_ros.actions import Node
 
-from cpg_walker.nodes.interface import CPG_NODE, NODE_NAMES, PID_NODE, SIM_NODE, controllers_lockstep
+from cpg_walker.nodes.interface import (
+    CPG_NODE,
+    NODE_NAMES,
+    ODOM_NODE,
+    PID_NODE,
+    SIM_NODE,
+    controllers_lockstep,
+)
 from launch import LaunchDescription
 
 PACKAGE = "cpg_walker"
@@ -78,13 +86,16 @@ def nodes(context) -> list:
     out = [
         Node(package=PACKAGE, executable=SIM_NODE, name=NODE_NAMES[SIM_NODE], output="screen",
              parameters=[params(NODE_NAMES[SIM_NODE]), {"use_sim_time": True, "pacing": pacing,
-                                                        "publish_description": False, **waits}]),
+                                                        "publish_description": False, "publish_tf": False,
+                                                        **waits}]),
         Node(package=PACKAGE, executable=PID_NODE, name=NODE_NAMES[PID_NODE], output="screen",
              parameters=[params(NODE_NAMES[PID_NODE]), {"use_sim_time": True,
                                                         "lockstep": controllers_lockstep(pacing),
                                                         "wait_for_targets": True}]),
         Node(package=PACKAGE, executable=CPG_NODE, name=NODE_NAMES[CPG_NODE], output="screen",
              parameters=[params(NODE_NAMES[CPG_NODE]), cpg]),
+        Node(package=PACKAGE, executable=ODOM_NODE, name=NODE_NAMES[ODOM_NODE], output="screen",
+             parameters=[params(NODE_NAMES[ODOM_NODE]), {"use_sim_time": True}]),
         Node(package="robot_state_publisher", executable="robot_state_publisher",
              name="robot_state_publisher", output="screen",
              parameters=[{"robot_description": description, "use_sim_time": True}]),

@@ -314,6 +314,7 @@ def _build() -> Real:
     from cpg_walker.graph.reference import declared_specs
     from cpg_walker.nodes.cpg_node import CPGNode
     from cpg_walker.nodes.foxglove_node import FoxgloveNode
+    from cpg_walker.nodes.odom_node import OdomNode
     from cpg_walker.nodes.params import params_file
     from cpg_walker.nodes.pid_node import PidNode
     from cpg_walker.nodes.recorder_node import RecorderNode
@@ -329,7 +330,7 @@ def _build() -> Real:
     try:
         with tempfile.TemporaryDirectory() as tmp:
             for cls, extra in ((sim_module.SimNode, []), (PidNode, []), (CPGNode, []), (TargetPlayerNode, []),
-                               (RelayNode, []), (FoxgloveNode, ["-p", "port:=0"]),
+                               (RelayNode, []), (OdomNode, []), (FoxgloveNode, ["-p", "port:=0"]),
                                (RecorderNode, ["-p", f"out_dir:={tmp}/bag"])):
                 name = cls.__name__  # the node's name below, once built
                 node = cls(context=ctx, cli_args=["--ros-args", "--params-file",
@@ -359,7 +360,7 @@ def _build() -> Real:
 
 
 _NAME = {"SimNode": "sim", "PidNode": "pid", "CPGNode": "cpg", "TargetPlayerNode": "target_player",
-         "RelayNode": "relay", "FoxgloveNode": "foxglove", "RecorderNode": "recorder"}
+         "RelayNode": "relay", "FoxgloveNode": "foxglove", "RecorderNode": "recorder", "OdomNode": "odom"}
 _REAL: list[Real] = []
 
 

@@ -55,7 +55,7 @@ def test_reference_names_only_what_the_nodes_have(real):  # noqa: F811
         topics = page_topics(text)
         for what, have in (("subscribes", real.subs[name]), ("publishes", real.pubs[name])):
             absent = topics[what] - have
-            if exe == ifc.SIM_NODE and what == "publishes":
+            if exe in (ifc.SIM_NODE, ifc.ODOM_NODE) and what == "publishes":
                 absent -= {ifc.TF}  # only where tf2_msgs imports (a ROS install)
             problems += [f"{exe}.md: /{name} {what} no {t}" for t in sorted(absent)]
             if not ifc.INTERFACES[exe].runtime_topics:

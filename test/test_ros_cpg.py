@@ -99,11 +99,13 @@ def test_60s_lockstep_walk_is_deterministic(tmp_path, ros_domain):
     test_ros_feedback.py) without a fall; a second, 20 s run reproduces the first 20 s of it bit for bit
     (lockstep: every period's inputs are fixed by the stamps). However slowly the machine runs it: the
     watchdog only ends a run whose sim time stops advancing."""
+    from cpg_walker.experiments.odometry import OdomWatcher
     from cpg_walker.experiments.walk_graph import run_graph_walk
 
+    odom = OdomWatcher()  # odom_node's /odom beside /odom/ground_truth (test_odometry.py: in-process)
     with SimWatchdog(ros_domain):
         report = run_graph_walk(tmp_path / "walk60", duration=60.0, feedback=False,
-                                timeout=sim_deadline(60.0))
+                                timeout=sim_deadline(60.0), watchers=[odom])
     assert not report["fell"] and report["duration_s"] == pytest.approx(60.0, abs=0.02), report
     # 4.981 m measured (cpg-walker walk --duration 60 --feedback off; lockstep: the same every run), held
     # within the headline walks' 10 % (experiments/headline.py MARGINS)
@@ -114,6 +116,14 @@ def test_60s_lockstep_walk_is_deterministic(tmp_path, ros_domain):
     assert (tmp_path / "walk60" / "walk.json").exists()
     stats = read_stats(stats_path(tmp_path / "walk60" / "graph_logs", "cpg_node"))["tick"]
     assert stats["ticks"] == 30000  # one per control period (its wall timing: the benchmark's graph section)
+    # odom_node, started by the graph: /odom every 10 ms in odom -> base_link, every sensor sample taken,
+    # within 1 % of the distance (in-process walks measured 0.5-0.85 %, docs/odometry.md)
+    odom_stats = read_stats(stats_path(tmp_path / "walk60" / "graph_logs", "odom_node"))
+    assert odom_stats["samples"] == 30000 and odom_stats["published"] == 6000, odom_stats
+    assert odom.frames == ("odom", "base_link") and odom.covariance[0] > 0
+    drift = odom.compare(report["touchdowns_s"]["left"])
+    assert drift["samples"] > 5000 and drift["start_offset_m"] < 0.001, drift
+    assert drift["position_error_max_pct"] < 1.0 and drift["yaw_error_max_deg"] < 0.2, drift
     with SimWatchdog(ros_domain):
         run_graph_walk(tmp_path / "walk20", duration=20.0, feedback=False, timeout=sim_deadline(20.0))
     long, short = (json.loads((tmp_path / d / "graph_record.json").read_text()) for d in ("walk60", "walk20"))

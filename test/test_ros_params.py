@@ -263,7 +263,7 @@ def test_launch_files_pass_each_node_its_file_then_the_arguments(monkeypatch, tm
     starts robot_state_publisher with the shipped URDF (sim_node then leaves /robot_description to it),
     and the recorder / RViz when asked."""
     walk = _launch_nodes(monkeypatch, tmp_path, "walk.launch.py", {})
-    assert set(walk) == {"sim", "pid", "cpg", "robot_state_publisher"}
+    assert set(walk) == {"sim", "pid", "cpg", "odom", "robot_state_publisher"}
     rsp = walk.pop("robot_state_publisher")
     assert rsp["package"] == rsp["executable"] == "robot_state_publisher"
     assert rsp["parameters"] == [{"robot_description": read_urdf(), "use_sim_time": True}]
@@ -271,6 +271,7 @@ def test_launch_files_pass_each_node_its_file_then_the_arguments(monkeypatch, tm
         assert kw["parameters"][0] == str(tmp_path / "share" / "config" / f"{name}.yaml")
         assert kw["executable"] == {v: k for k, v in NODE_NAMES.items()}[name]
     assert walk["sim"]["parameters"][1]["publish_description"] is False
+    assert walk["sim"]["parameters"][1]["publish_tf"] is False  # odom_node's estimate is odom -> base_link
     assert not {"zeta", "alpha", "feedback"} & set(walk["cpg"]["parameters"][1])
     file_pacing = ros_parameters("sim.yaml", "sim")["pacing"]
     assert walk["pid"]["parameters"][1]["lockstep"] == (file_pacing == "lockstep")

@@ -14,7 +14,7 @@ from cpg_walker.walker.controller import ALPHA_RANGE, ZETA_RANGE
 from cpg_walker.walker.governor import GovernorConfig
 
 ALIASES = {"sim": "sim_node", "pid": "pid_node", "cpg": "cpg_node", "player": "target_player_node",
-           "target_player": "target_player_node", "foxglove": "foxglove_node"}
+           "target_player": "target_player_node", "foxglove": "foxglove_node", "odom": "odom_node"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:

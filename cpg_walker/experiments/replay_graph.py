@@ -106,6 +106,7 @@ def run_graph(
     domain_id: int | None = None,
     relay: dict | None = None,
     placement: dict[str, Placement] | None = None,
+    odometry: bool = True,
 ) -> GraphRun:
     """Run sim_node + pid_node (+ ``target`` node with ``target_params``) for ``duration`` sim seconds.
     Each node gets its parameters file (config/<node>.yaml), then these arguments as overrides
@@ -121,7 +122,9 @@ def run_graph(
     graph's DDS domain (None: a free one). ``relay``: start relay_node (these parameter overrides of
     config/relay.yaml) before the others and route the consumers of its topics through it (remaps:
     nodes/relay_node.py ``consumer_remaps``). ``placement``: where nodes run, by executable (Graph; e.g.
-    in another network namespace). Raises RuntimeError (with the sim's log tail) if the sim fails."""
+    in another network namespace). ``odometry``: odom_node too (the leg odometry on /odom; then it, not
+    the sim, publishes odom -> base_link on /tf: sim_node's ``publish_tf`` false). Raises RuntimeError
+    (with the sim's log tail) if the sim fails."""
     from cpg_walker.robot.run_record import RunRecord
 
     if pacing not in PACINGS:
@@ -136,6 +139,8 @@ def run_graph(
         if bag_dir is not None:
             start_recorder(g, bag_dir, timeout)
         remaps: dict[str, dict[str, str]] = {}
+        if odometry:  # first: subscribed before the sim's first state (its odom origin: the start pose)
+            g.start("odom_node", **more.get("odom_node", {}))
         if relay is not None:
             remaps = consumer_remaps(relay)
             g.start("relay_node", **relay, **more.get("relay_node", {}))
@@ -146,8 +151,9 @@ def run_graph(
             g.start(target, remaps=remaps.get(target), **(target_params or {}), **more.get(target, {}))
         period = {} if control_period is None else {"control_period": float(control_period)}
         waits = {} if bag_dir is None else {"wait_for_subscriber": RECORDER_NAME}  # bag from t = 0
+        tf = {"publish_tf": False} if odometry else {}  # REP-105: odom -> base_link from the estimator
         g.start("sim_node", pacing=pacing, duration=float(duration), stop_on_fall=stop_on_fall,
-                record_path=str(record_path), **period, **waits, **more.get("sim_node", {}))
+                record_path=str(record_path), **period, **waits, **tf, **more.get("sim_node", {}))
         extra = attach(g) if attach is not None else []
         try:
             status = g.wait("sim_node", timeout)

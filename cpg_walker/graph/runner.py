@@ -16,7 +16,7 @@ from typing import TextIO
 from cpg_walker.errors import InputError
 
 PREFIX = {"sim_node": "sim", "pid_node": "pid", "cpg_node": "cpg", "target_player_node": "player",
-          "recorder_node": "rec", "foxglove_node": "fox"}
+          "recorder_node": "rec", "foxglove_node": "fox", "odom_node": "odom"}
 
 
 @dataclass
@@ -55,10 +55,13 @@ class GraphSpec:
         target = "target_player_node" if self.player else "cpg_node"
         sim = {name: (float(value) if name == "duration" else value)
                for name, value in (("pacing", self.pacing), ("duration", self.duration)) if value is not None}
+        # odom_node first (subscribed before the sim's first state); the estimate is odom -> base_link on
+        # /tf, so the sim's ground truth is not (REP-105)
         out: dict[str, dict[str, object]] = {
+            "odom_node": {},
             "pid_node": {"lockstep": controllers_lockstep(pacing), "wait_for_targets": True},
             target: {"lockstep": controllers_lockstep(pacing)} if not self.player else {},
-            "sim_node": sim,
+            "sim_node": {"publish_tf": False, **sim},
         }
         for name in ("zeta", "alpha"):
             value = getattr(self, name)
@@ -184,7 +187,8 @@ def banner(domain: int, how: str, spec: GraphSpec, log_dir: Path) -> str:
     target = "target_player_node (recorded gait)" if spec.player else "cpg_node"
     duration = spec.sim_value("duration")
     until = f"{duration:g} sim s" if duration else "until Ctrl-C"
-    lines = [f"ROS_DOMAIN_ID={domain} ({how}); sim_node + pid_node + {target}, {spec.sim_value('pacing')} "
+    lines = [f"ROS_DOMAIN_ID={domain} ({how}); sim_node + pid_node + {target} + odom_node, "
+             f"{spec.sim_value('pacing')} "
              f"pacing, {until}",
              f"node logs: {log_dir}"]
     if spec.foxglove is not None:

@@ -25,6 +25,7 @@ JOINT_TORQUES = "/joint_torques"
 JOINT_TRAJECTORY = "/joint_trajectory"
 IMU = "/imu"
 FOOT_LOAD = "/foot_load"  # namespace: /foot_load/left, /foot_load/right (foot_load_topic)
+ODOM = "/odom"
 ODOM_GROUND_TRUTH = "/odom/ground_truth"
 SIM_FALLEN = "/sim/fallen"
 SIM_SERVO_HOLD = "/sim/servo_hold"
@@ -80,12 +81,14 @@ def matching_qos(infos: list, depth: int) -> QoSProfile:
 # ----------------------------------------------------------------------------------------- nodes
 #: Each node executable's ROS node name; its parameters are config/<node name>.yaml.
 NODE_NAMES = {"sim_node": "sim", "pid_node": "pid", "target_player_node": "target_player", "cpg_node": "cpg",
-              "recorder_node": "recorder", "foxglove_node": "foxglove", "relay_node": "relay"}
+              "recorder_node": "recorder", "foxglove_node": "foxglove", "relay_node": "relay",
+              "odom_node": "odom"}
 #: Node name -> executable.
 EXECUTABLES = {name: exe for exe, name in NODE_NAMES.items()}
 
 SIM_NODE, PID_NODE, CPG_NODE, PLAYER_NODE = "sim_node", "pid_node", "cpg_node", "target_player_node"
 RECORDER_NODE, FOXGLOVE_NODE, RELAY_NODE = "recorder_node", "foxglove_node", "relay_node"
+ODOM_NODE = "odom_node"
 
 # ----------------------------------------------------------------------------------------- the graph
 #: sim_node's pacings: wall-clock schedule, as fast as possible, or one period per controller answer.
@@ -133,6 +136,8 @@ TOPICS = {t.name: t for t in (
     Topic(IMU, "sensor_msgs/msg/Imu", "torso IMU, frame 'imu'"),
     *(Topic(topic, "geometry_msgs/msg/WrenchStamped", f"{side} sole load, in the sole's frame")
       for side, topic in zip(FOOT_LOAD_SIDES, FOOT_LOADS, strict=True)),
+    Topic(ODOM, "nav_msgs/msg/Odometry",
+          "the leg odometry's estimate odom -> base_link, with a covariance (joints, IMU, sole loads)"),
     Topic(ODOM_GROUND_TRUTH, "nav_msgs/msg/Odometry",
           "ground-truth odometry odom -> base_link (evaluation only)"),
     Topic(SIM_FALLEN, "std_msgs/msg/Bool", "the robot has fallen", latched=True),
@@ -172,7 +177,8 @@ INTERFACES = {i.executable: i for i in (
                   publishes=(CLOCK, JOINT_STATES, IMU, *FOOT_LOADS, ODOM_GROUND_TRUTH, SIM_FALLEN,
                              SIM_SERVO_HOLD, DIAGNOSTICS, ROBOT_DESCRIPTION, TF),
                   services=("~/reset", "~/push"),
-                  note="/robot_description only with publish_description; /tf only where tf2_msgs imports."),
+                  note="/robot_description only with publish_description; /tf only with publish_tf, where "
+                       "tf2_msgs imports."),
     NodeInterface(PID_NODE, "the HOAP-2 joint servos: answers each state with torques",
                   subscribes=(JOINT_TARGETS, JOINT_STATES, JOINT_TRAJECTORY), publishes=(JOINT_TORQUES,),
                   note="/joint_trajectory is not subscribed in lockstep. Per-joint gains (`kp.<joint>` ...) "
@@ -180,6 +186,9 @@ INTERFACES = {i.executable: i for i in (
     NodeInterface(CPG_NODE, "the learned CPG: joint targets from the oscillators, on /clock",
                   subscribes=(CLOCK, IMU, *FOOT_LOADS, CMD_VEL, SIM_SERVO_HOLD),
                   publishes=(DIAGNOSTICS, CPG_STATE, JOINT_TARGETS, JOINT_TRAJECTORY)),
+    NodeInterface(ODOM_NODE, "leg odometry from the joints, the IMU and the sole loads (no ground truth)",
+                  subscribes=(JOINT_STATES, IMU, *FOOT_LOADS), publishes=(ODOM, TF),
+                  note="/tf only with publish_tf, where tf2_msgs imports."),
     NodeInterface(PLAYER_NODE, "streams a recorded gait as joint targets, on /clock",
                   subscribes=(CLOCK,), publishes=(JOINT_TARGETS,)),
     NodeInterface(RECORDER_NODE, "records every topic of the graph to one rosbag2 MCAP",

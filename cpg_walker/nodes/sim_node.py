@@ -149,7 +149,8 @@ class SimNode(Node):
         if describe:  # once: transient local hands it to subscribers that join later
             self.pub_description = self.create_publisher(String, ifc.ROBOT_DESCRIPTION, latched)
             self.pub_description.publish(String(data=read_urdf()))
-        self.pub_tf = None if TFMessage is None else self.create_publisher(TFMessage, ifc.TF, 100)
+        self.pub_tf = (None if TFMessage is None or not v["publish_tf"]
+                       else self.create_publisher(TFMessage, ifc.TF, 100))
         self.hot = HotPath(self, [self.create_subscription(JointState, ifc.JOINT_TORQUES,
                                                            self._on_torque, ifc.DEPTH)])
         self.create_service(Trigger, "~/reset", self._on_reset)

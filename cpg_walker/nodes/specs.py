@@ -44,6 +44,8 @@ SIM = (
     double("servo_hold_after", "sim s a torque may be old before the servos hold their posture by themselves "
            "(a lost controller); 0 = never", 0.0, 10.0, read_only=True),
     double("odom_period", "sim s between ground-truth odometry messages", 0.0, 10.0, read_only=True),
+    boolean("publish_tf", "publish the ground truth's odom -> base_link on /tf (where tf2_msgs imports); off "
+            "when odom_node's estimate does (REP-105)", read_only=True),
     double("diagnostics_period", "sim s between /diagnostics messages", 0.01, 100.0, read_only=True),
     double("imu_variance_floor", "diagonal IMU variance when the model's sensor noise is 0", 0.0, 1.0,
            read_only=True),
@@ -117,6 +119,30 @@ FOXGLOVE = (
            "without it", 0.1, 60.0, read_only=True),
     strings("parameters", "parameters of other nodes shown in Foxglove's parameter panel, NODE.NAME (e.g. "
             "cpg.zeta)", read_only=True),
+    *SCHEDULING,
+    *STATS,
+)
+
+ODOM = (
+    double("publish_period", "sim s between /odom messages (every sensor sample is processed)", 1e-4, 10.0,
+           read_only=True),
+    boolean("publish_tf", "also publish odom -> base_link on /tf (where tf2_msgs imports)", read_only=True),
+    boolean("flat_floor", "anchor a touching-down foot at the floor's height (a flat-floor prior)",
+            read_only=True),
+    double("velocity_filter", "s: time constant of the low-pass on the position's rate (the twist)",
+           0.0, 10.0, read_only=True),
+    *(double(f"covariance.{name}", text, 0.0, 100.0, read_only=True) for name, text in (
+        ("position_sigma0", "m: x, y standard deviation at the start"),
+        ("position_per_m", "m per m walked: growth of the x, y standard deviation"),
+        ("position_per_rad", "m per rad turned: growth of the x, y standard deviation"),
+        ("z_sigma0", "m: z standard deviation at the start"),
+        ("z_per_m", "m per m walked: growth of the z standard deviation"),
+        ("tilt_sigma", "rad: roll and pitch standard deviation"),
+        ("yaw_sigma0", "rad: yaw standard deviation at the start"),
+        ("yaw_per_rad", "rad per rad turned: growth of the yaw standard deviation"),
+        ("yaw_per_m", "rad per m walked: growth of the yaw standard deviation"),
+        ("linear_velocity_sigma", "m/s: twist linear standard deviation"),
+        ("angular_velocity_sigma", "rad/s: twist angular standard deviation"))),
     *SCHEDULING,
     *STATS,
 )
@@ -232,7 +258,7 @@ CPG_FEEDBACK = (strings("feedback_pathways", f"feedback pathways in use, any of 
 #: Every node's specs, by executable.
 SPECS = {"sim_node": SIM, "pid_node": PID, "target_player_node": TARGET_PLAYER,
          "cpg_node": CPG + CPG_FEEDBACK, "recorder_node": RECORDER, "foxglove_node": FOXGLOVE,
-         "relay_node": RELAY}
+         "relay_node": RELAY, "odom_node": ODOM}
 
 
 def node_help(executable: str) -> str:
