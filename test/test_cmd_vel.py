@@ -27,7 +27,7 @@ from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
 def limits(**kw) -> CmdVelLimits:
     base = {"timeout": 0.5, "max_linear_x": 0.11, "min_linear_x": -0.1, "max_angular_z": 0.15,
             "stand_below": 0.005, "alpha_fall_rate": 1000.0,  # 1000: α drops within a tick
-            "angular_z_rate": 1000.0, "max_linear_y": 0.05}
+            "angular_z_rate": 1000.0, "angular_z_rate_in_place": 1000.0, "max_linear_y": 0.05}
     return CmdVelLimits(**{**base, **kw})
 
 
@@ -313,7 +313,8 @@ def test_steering_steps_in_place_or_faster_and_slews_the_turn():
     """linear.x ~ 0 with a turn or linear.y steps in place at (±steer_zeta, steer_alpha) in the walking
     direction; a turn faster than GENTLE_TURN (or a side step) while walking steps at steer_zeta with the
     α that keeps the speed (``SpeedMap.alpha_at``); gentler turns keep the map's (ζ, α); linear.y is
-    clamped to max_linear_y; the turn output moves at most angular_z_rate per sim s."""
+    clamped to max_linear_y; the turn output moves at most angular_z_rate_in_place per sim s in place,
+    angular_z_rate otherwise."""
     from cpg_walker.walker.cmd_vel import GENTLE_TURN
 
     m = SpeedMap(toy_map())
@@ -333,10 +334,12 @@ def test_steering_steps_in_place_or_faster_and_slews_the_turn():
     assert f.update(0.3, 1.5, 0.3) == CmdVelOutput(1.5, 0.3, 0.0, "stepping in place", 0.05)
     f.command(0.0, 0.0, 0.0)
     assert f.target_y == 0.0 and f.target[1] == 0.0  # standing: no side step
-    slow = CmdVelFollower(m, limits(max_angular_z=0.5, angular_z_rate=1.0), zeta=1.0)
+    slow = CmdVelFollower(m, limits(max_angular_z=0.5, angular_z_rate_in_place=1.0, angular_z_rate=0.5),
+                          zeta=1.0)
     slow.command(0.0, 0.0, 0.5)
     turns = [slow.update(t, 1.5, 0.3).turn_rate for t in np.arange(0.0, 0.8, 0.1)]
-    assert turns == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.4, 0.3])  # timed out after 0.5 s
+    # timed out after 0.5 s: not in place any more, down at angular_z_rate
+    assert turns == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.45, 0.4])
 
 
 @pytest.mark.slow

@@ -240,7 +240,7 @@ def test_held_positive_hip_yaw_amplitude_turns_left(learned):
     turned = {}
     for u in (0.05, -0.05):
         fb = FeedbackController(FeedbackConfig.load(), ("heading",))
-        fb.heading_amplitude = lambda stride_s=0.0, u=u: u  # held amplitude, no loop
+        fb.heading_amplitude = lambda stride_s=0.0, alpha=1.0, u=u: u  # held amplitude, no loop
         src = FeedbackGaitSource(_ctrl(learned), fb)
         r = run_replay(Hoap2Sim(), src, PidLaw.from_config(), src.active_from + 6.0)
         i0 = int(np.searchsorted(r.t, src.active_from))

@@ -37,6 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "side-step 0.05 m/s 20 s, forward 0.15 m/s 20 s)")
     d.add_argument("--pacing", choices=("lockstep", "realtime"), default="lockstep",
                    help="with --graph (not --attach): the started graph's pacing")
+    d.add_argument("-p", dest="params", action="append", default=[], metavar="NODE:NAME=VALUE",
+                   help="with --graph (not --attach): a start-up parameter of the started graph, as "
+                        "`cpg-walker graph -p`; repeatable")
     d.set_defaults(func=_drive)
 
 
@@ -57,9 +60,13 @@ def _drive(args: argparse.Namespace) -> int:
 
         env_domain_id()  # InputError when ROS_DOMAIN_ID is not a domain
     if args.graph:
+        from cpg_walker.cli.graph import parse_param
         from cpg_walker.experiments.cmd_vel_graph import drive_graph
 
-        res = drive_graph(args.out, args.domain_id, args.attach, plan=args.plan, pacing=args.pacing)
+        for text in args.params:
+            parse_param(text)  # InputError naming the bad one, before anything starts
+        res = drive_graph(args.out, args.domain_id, args.attach, plan=args.plan, pacing=args.pacing,
+                          params=args.params)
         print(open(f"{args.out}/drive_graph.md", encoding="utf-8").read())
         return report_fall("drive-check", [fall_line("drive-check", res.get("fell_at_s"),
                                                      what="driven through the graph")] if res["fell"] else [])

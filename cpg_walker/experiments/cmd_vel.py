@@ -205,6 +205,8 @@ def run_drive(drive: Drive, map_file: str | None = None) -> dict:
                "zeta": round(z, 4), "alpha": round(al, 4), "window": [round(a, 2), round(b, 2)]}
         if not r.fell or (r.fall_time_s or 0) > b:
             seg.update(trajectory_rates(r, a, b))
+        if not r.fell or (r.fall_time_s or 0) > until:
+            seg["whole"] = whole_segment(r, start, until)
         out["segments"].append(seg)
         start = until
     if not r.fell:
@@ -234,6 +236,22 @@ def trajectory_rates(r, t0: float, t1: float, chunk_s: float = 1.0) -> dict:
     dh = heading_at(r, float(edges[-1])) - heading_at(r, float(edges[0]))
     return {"speed_mps": round(fwd / span, 4), "lateral_mps": round(lat / span, 4),
             "turn_rate_rad_s": round(dh / span, 4), "turn_rate_deg_s": round(math.degrees(dh / span), 2)}
+
+
+def whole_segment(r, t0: float, t1: float) -> dict:
+    """Over all of a segment (from its command on): the angle turned (the unwrapped yaw's change) and the
+    displacement along and across the heading (1 s pieces, each along its mean heading)."""
+    i0, i1 = (min(int(np.searchsorted(r.t, x)), len(r.t) - 1) for x in (t0, t1))
+    edges = np.append(np.arange(t0, t1 - 1e-9, 1.0), t1)
+    fwd = side = 0.0
+    for a, b in itertools.pairwise(edges):
+        ia, ib = (min(int(np.searchsorted(r.t, x)), len(r.t) - 1) for x in (a, b))
+        h = float(np.mean(r.heading[ia:ib + 1]))
+        d = r.base_xy[ib] - r.base_xy[ia]
+        fwd += float(d @ [math.cos(h), math.sin(h)])
+        side += float(d @ [-math.sin(h), math.cos(h)])
+    return {"turned_rad": round(float(r.heading[i1] - r.heading[i0]), 3), "forward_m": round(fwd, 3),
+            "sideways_m": round(side, 3)}
 
 
 def _xy_at(r, t: float) -> np.ndarray:

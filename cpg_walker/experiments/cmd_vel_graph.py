@@ -47,9 +47,11 @@ def _yaw(q) -> float:
 
 
 def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = False,
-                wall_limit_s: float = 1800.0, plan: str = "drive", pacing: str = "lockstep") -> dict:
+                wall_limit_s: float = 1800.0, plan: str = "drive", pacing: str = "lockstep",
+                params: list[str] | None = None) -> dict:
     """Run a plan (``PLANS``: "drive" the module docstring's, "steer" STEER_PLAN) against a graph started
-    with ``pacing`` (or attached to); write and return the measurements."""
+    with ``pacing`` and the ``cpg-walker graph -p`` ``params`` (or attached to); write and return the
+    measurements."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist
     from nav_msgs.msg import Odometry
@@ -72,7 +74,8 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     proc = None
     if not attach:
         cmd = [sys.executable, "-m", "cpg_walker.cli.main", "graph", "--pacing", pacing, "--duration",
-               str(START_S + total), "--domain-id", str(domain), "--log-dir", str(out / "logs")]
+               str(START_S + total), "--domain-id", str(domain), "--log-dir", str(out / "logs"),
+               *(a for p in params or () for a in ("-p", p))]
         proc = subprocess.Popen(cmd, env=isolated_env(domain), stdout=open(out / "graph.log", "w"),
                                 stderr=subprocess.STDOUT, start_new_session=True)
     probe = Probe(domain, "drive_check", parameter_services=False)
@@ -84,7 +87,12 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
         if m.data and not fallen:
             fallen.append(odom[-1][0] if odom else float("nan"))
 
+    from cpg_walker.experiments.odometry import OdomWatcher
+
+    est = OdomWatcher()  # /odom (odom_node's estimate) beside the truth, by stamp
+
     def on_odom(m: Odometry) -> None:
+        est.on_truth(m)
         p = m.pose.pose
         odom.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, p.position.x, p.position.y,
                      _yaw(p.orientation)))
@@ -97,6 +105,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
                     cmd_state.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, v["cmd_vel"]))
 
     probe.subscribe(ifc.ODOM_GROUND_TRUTH, Odometry, on_odom, 200)
+    probe.subscribe(ifc.ODOM, Odometry, est.on_estimate, 200)
     probe.subscribe(ifc.DIAGNOSTICS, DiagnosticArray, on_diag, 50)
     probe.subscribe(ifc.SIM_FALLEN, Bool, on_fallen, ifc.latched_qos())
     pub = probe.node.create_publisher(Twist, ifc.CMD_VEL, 10)
@@ -160,11 +169,26 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     res = measure(np.array(odom), t0, sent, cmd_state, steps)
     res["fell"] = bool(fallen)
     res["fell_at_s"] = round(fallen[0], 2) if fallen else None
+    res["odometry"] = odometry_error(est)
     res.update(domain_id=domain, attached=attach, plan_name=plan, plan=[list(p) for p in steps],
-               stop_s=STOP_S, first_command_s=t0, pacing=None if attach else pacing)
+               stop_s=STOP_S, first_command_s=t0, pacing=None if attach else pacing,
+               params=None if attach else list(params or ()))
     (out / "drive_graph.json").write_text(json.dumps(res, indent=2) + "\n")
     (out / "drive_graph.md").write_text(markdown(res))
     return res
+
+
+#: sim s between the points the distance walked is summed over (about a stride: not the within-stride sway)
+DISTANCE_STEP_S = 2.0
+
+
+def odometry_error(est) -> dict | None:
+    """/odom against /odom/ground_truth over the drive (experiments/odometry.py ``drift``; distance summed
+    over DISTANCE_STEP_S pieces); None without /odom (no odom_node in the graph)."""
+    if not est.est or not (set(est.est) & set(est.truth)):
+        return None
+    t = sorted(est.truth)
+    return est.compare(list(np.arange(t[0] / 1e9, t[-1] / 1e9, DISTANCE_STEP_S)))
 
 
 def _segment(steps: tuple, dt: float):
@@ -246,6 +270,15 @@ def markdown(res: dict) -> str:
     lines.append(f"Last command at sim {res['last_command_s']:.2f} s; cpg_node timed out "
                  f"{res['timed_out_after_s']} s after it; the base moved < 1 cm/s from "
                  f"{res['stopped_after_s']} s after it.")
+    od = res.get("odometry")
+    if od:
+        lines.append(f"/odom against /odom/ground_truth: {od['distance_m']:.2f} m walked and "
+                     f"{od['turned_deg']:.0f}° turned over {od['duration_s']:.0f} s; position error "
+                     f"{od['position_error_final_m']:.3f} m at the end ({od['position_error_final_pct']} % "
+                     f"of the distance; max {od['position_error_max_pct']} %), yaw error "
+                     f"{od['yaw_error_final_deg']:+.2f}°.")
+    else:
+        lines.append("No /odom (odom_node not in the graph).")
     if res.get("fell"):
         at = res["fell_at_s"]
         lines.append(f"The robot FELL (/sim/fallen): reported at about sim {at} s "

@@ -206,6 +206,14 @@ class OdomWatcher:
             self.covariance = list(msg.pose.covariance)
             self.frames = (msg.header.frame_id, msg.child_frame_id)
 
+    def on_estimate(self, msg) -> None:
+        """Keep an /odom message (a subscription callback)."""
+        self._keep(self.est, msg)
+
+    def on_truth(self, msg) -> None:
+        """Keep an /odom/ground_truth message (a subscription callback)."""
+        self._keep(self.truth, msg)
+
     def _run(self, domain_id: int) -> None:
         from nav_msgs.msg import Odometry
 
@@ -214,8 +222,8 @@ class OdomWatcher:
 
         probe = Probe(domain_id, "odom_watch", parameter_services=False)
         try:
-            probe.subscribe(ifc.ODOM, Odometry, lambda m: self._keep(self.est, m), 200)
-            probe.subscribe(ifc.ODOM_GROUND_TRUTH, Odometry, lambda m: self._keep(self.truth, m), 200)
+            probe.subscribe(ifc.ODOM, Odometry, self.on_estimate, 200)
+            probe.subscribe(ifc.ODOM_GROUND_TRUTH, Odometry, self.on_truth, 200)
             while not self._stop.is_set():
                 probe.executor.spin_once(timeout_sec=0.01)
         finally:

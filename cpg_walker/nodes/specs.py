@@ -179,8 +179,9 @@ CPG_CMD_VEL_LIMITS = (
     double("cmd_vel.steer_zeta", "|zeta| at least, while turning or side-stepping", 0.3, 2.0),
     double("cmd_vel.steer_alpha", "alpha at least, while turning or side-stepping (stepping in place)",
            0.01, 1.0),
-    double("cmd_vel.angular_z_rate", "the turn rate moves at most this much per sim s (rad/s^2)",
+    double("cmd_vel.angular_z_rate", "the turn rate moves at most this much per sim s walking (rad/s^2)",
            0.01, 100.0),
+    double("cmd_vel.angular_z_rate_in_place", "the same stepping in place (rad/s^2)", 0.01, 100.0),
 )
 
 CPG = (

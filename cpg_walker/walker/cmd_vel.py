@@ -37,7 +37,7 @@ from cpg_walker.errors import InputError
 
 #: keys of a CmdVelLimits (and of cpg_node's ``cmd_vel.<key>`` parameters)
 LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand_below", "alpha_fall_rate",
-              "max_linear_y", "steer_zeta", "steer_alpha", "angular_z_rate")
+              "max_linear_y", "steer_zeta", "steer_alpha", "angular_z_rate", "angular_z_rate_in_place")
 
 
 def _read_yaml(path: str | Path | None, default: str) -> tuple[dict, Path]:
@@ -217,7 +217,8 @@ class CmdVelLimits:
     max_linear_y: float = 0.0
     steer_zeta: float = 1.5
     steer_alpha: float = 0.3
-    angular_z_rate: float = 1.0
+    angular_z_rate: float = 0.3
+    angular_z_rate_in_place: float = 1.0
 
     def __post_init__(self) -> None:
         for k in LIMIT_KEYS:
@@ -236,8 +237,9 @@ class CmdVelLimits:
         if not 0.3 <= self.steer_zeta <= 2.0 or not 0 < self.steer_alpha <= 1.0:
             raise ValueError(f"cmd_vel.steer_zeta must be in [0.3, 2] and cmd_vel.steer_alpha in (0, 1], got "
                              f"{self.steer_zeta} / {self.steer_alpha}")
-        if not self.angular_z_rate > 0:
-            raise ValueError(f"cmd_vel.angular_z_rate must be > 0 rad/s^2, got {self.angular_z_rate}")
+        for k in ("angular_z_rate", "angular_z_rate_in_place"):
+            if not getattr(self, k) > 0:
+                raise ValueError(f"cmd_vel.{k} must be > 0 rad/s^2, got {getattr(self, k)}")
         if not self.stand_below >= 0:
             raise ValueError(f"cmd_vel.stand_below must be >= 0, got {self.stand_below}")
         if not self.alpha_fall_rate > 0:
@@ -301,6 +303,9 @@ GENTLE_TURN = 0.15
 #: long steps fell: in-process, the governed walk at α 1 turned in place at 0.5 rad/s fell 1.8 s after
 #: the command; a side step without the ankle pathway 2.4 s after it)
 TURN_ALPHA_TOLERANCE = 0.1
+#: ... and, walking (not in place), the applied |ζ| within this of steer_zeta (the walk at 0.08 m/s
+#: turning 0.3 rad/s at once, without the ankle pathway, fell 3.5 s after the command with ζ on its way)
+TURN_ZETA_TOLERANCE = 0.15
 #: Reversal: α command 0 until the applied α is below this, ...
 REVERSE_ALPHA = 0.05
 #: ... then the new ζ, α 0 until the applied ζ is this close (fraction of |new ζ|) to it, ...
@@ -321,7 +326,7 @@ class CmdVelFollower:
         self.linear_y = 0.0  # as received
         self.target: tuple[float, float, float] = (self.zeta, 0.0, 0.0)
         self.target_y = 0.0
-        self._turn_out = 0.0  # the turn rate output (slewed at limits.angular_z_rate)
+        self._turn_out = 0.0  # the turn rate output (slewed at limits.angular_z_rate[_in_place])
         self._reversing = False  # direction swapped, waiting for the applied ζ
         self.reverse_via_stop = True  # False: flip ζ at once (measured against; docs/cmd_vel.md)
         self.alpha_rate: float | None = None  # limit on every rise of the α command (per sim s); None: none
@@ -390,12 +395,13 @@ class CmdVelFollower:
                 return self._out(t, z, 0.0, 0.0)
             self._reversing, self._ramp = False, True
         vy = self.target_y
-        if applied_alpha > a + TURN_ALPHA_TOLERANCE:  # a fast turn or a side step waits for the steps
+        in_place = self.map.command(self.last[1], self.limits)[1] == 0.0
+        if applied_alpha > a + TURN_ALPHA_TOLERANCE or (  # a fast turn or a side step waits for the steps
+                not in_place and abs(applied_zeta) < self.limits.steer_zeta - TURN_ZETA_TOLERANCE):
             vy = 0.0
             if abs(w) > GENTLE_TURN:
                 w = math.copysign(GENTLE_TURN, w)
         self.zeta = z
-        in_place = self.map.command(self.last[1], self.limits)[1] == 0.0
         self.state = "stepping in place" if in_place else "following"
         rate = self.alpha_rate
         if rate is None and self._ramp:
@@ -413,8 +419,11 @@ class CmdVelFollower:
         dt = max(t - self._t_prev, 0.0)
         if a < self._alpha_out:  # the α command falls at most limits.alpha_fall_rate per sim s
             a = max(a, self._alpha_out - self.limits.alpha_fall_rate * dt)
-        step = self.limits.angular_z_rate * dt  # the turn rate moves at most angular_z_rate per sim s
+        lim = self.limits  # the turn rate moves at most angular_z_rate(_in_place) per sim s
+        step = (lim.angular_z_rate_in_place if self.state == "stepping in place" else lim.angular_z_rate) * dt
         w = min(max(w, self._turn_out - step), self._turn_out + step)
+        if w * self._turn_out < 0.0:  # the turn reverses: through 0 for a tick (apply_output: hold heading)
+            w = 0.0
         self._t_prev, self._alpha_out, self._turn_out = t, a, w
         return CmdVelOutput(z, a, w, self.state, vy)
 

@@ -137,6 +137,19 @@ def turn_unavailable(enabled: bool, weight: float, pathways: tuple[str, ...]) ->
     return ""
 
 
+def side_step_unavailable(turn_reason: str, ankle_allowed: bool, pathways: tuple[str, ...]) -> str:
+    """Why linear.y cannot side-step the robot ('' if it can): the side step walks only with the heading
+    pathway's oscillator phase and the ankle pathway's balance (without it every side step measured
+    in-process fell within 12 s, docs/steering.md)."""
+    if turn_reason:
+        return turn_reason
+    if "ankle" not in pathways:
+        return "the ankle feedback pathway is not in feedback_pathways"
+    if not ankle_allowed:
+        return "the ankle pathway is off in realtime (cpg_node ankle_in_realtime false)"
+    return ""
+
+
 class CPGDriver:
     """The learned CPG (``ctrl``, started over from its dict on a sim reset) as a target source on sim
     time, with the feedback pathways, the /cmd_vel follower and the horizon (module docstring). ``zeta``
@@ -189,6 +202,7 @@ class CPGDriver:
         self.sample_ages = {"ticks": 0, "max_s": 0.0, "older_than_ankle_max": 0}
         self._cmd_logged: tuple | None = None
         self.cmd_turn = "ok"  # ok | why angular.z cannot turn the robot
+        self.cmd_side = "ok"  # ok | why linear.y cannot side-step it
         self.ankle_allowed = self.lockstep or bool(ankle_in_realtime)
         self._start(feedback)
 
@@ -323,8 +337,15 @@ class CPGDriver:
         reason = turn_unavailable(self.feedback_on, self.fade.weight, fb.pathways)
         want = self.cmd.limits.clamp_angular(self.cmd.last[2])
         self.cmd_turn = reason if reason and want != 0.0 else "ok"
-        if reason and out.turn_rate != 0.0:
-            out = CmdVelOutput(out.zeta, out.alpha, 0.0, out.state, out.linear_y)
+        side = side_step_unavailable(reason, self.ankle_allowed, fb.pathways)
+        want_y = self.cmd.limits.clamp_lateral(self.cmd.linear_y)
+        self.cmd_side = side if side and want_y != 0.0 else "ok"
+        if (reason and out.turn_rate != 0.0) or (side and out.linear_y != 0.0):
+            out = CmdVelOutput(out.zeta, out.alpha, 0.0 if reason else out.turn_rate, out.state,
+                               0.0 if side else out.linear_y)
+        if side and want_y != 0.0:
+            self.out.log("warn", f"/cmd_vel linear.y {want_y:g} m/s cannot side-step the robot: {side}",
+                         "/cmd_vel side step")
         if reason and want != 0.0:
             self.out.log("warn", f"/cmd_vel angular.z {want:g} rad/s cannot turn the robot: {reason}",
                          "/cmd_vel turn")
@@ -605,14 +626,17 @@ class CPGDriver:
         state = ("off" if not self.follow_cmd_vel else "waiting" if cmd.last is None
                  else "parameters" if self.cmd_override else cmd.state)
         v.update({"cmd_vel": state, "cmd_vel_received": str(self.cmd_vel_counts["received"]),
-                  "cmd_vel_dropped": str(self.cmd_vel_counts["dropped"]), "cmd_vel_turn": self.cmd_turn})
+                  "cmd_vel_dropped": str(self.cmd_vel_counts["dropped"]), "cmd_vel_turn": self.cmd_turn,
+                  "cmd_vel_side_step": self.cmd_side})
         if cmd.last is not None:
-            v.update({"cmd_vel_linear_x": f"{cmd.last[1]:g}", "cmd_vel_angular_z": f"{cmd.last[2]:g}",
+            v.update({"cmd_vel_linear_x": f"{cmd.last[1]:g}", "cmd_vel_linear_y": f"{cmd.linear_y:g}",
+                      "cmd_vel_angular_z": f"{cmd.last[2]:g}",
                       "cmd_vel_age_s": f"{max(0.0, t_ns / 1e9 - cmd.last[0]):.3f}"})
         if self.cmd_out is not None:
             o = self.cmd_out
             v.update({"cmd_vel_zeta": f"{o.zeta:.6g}", "cmd_vel_alpha": f"{o.alpha:.6g}",
-                      "cmd_vel_turn_rate": f"{o.turn_rate:.6g}"})
+                      "cmd_vel_turn_rate": f"{o.turn_rate:.6g}",
+                      "cmd_vel_side_step_mps": f"{o.linear_y:.6g}"})
         return v
 
     def summary(self) -> dict:

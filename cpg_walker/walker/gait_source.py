@@ -350,7 +350,7 @@ class FeedbackGaitSource(CPGGaitSource):
             d = phase_reset(st, self.ctrl.net.omega, target, strength=strength)
             fb.resets.append((t, d))
         stride_s = self.ctrl.period / max(abs(z), MIN_STRIDE_ZETA)
-        self._yaw_u = fb.heading_amplitude(stride_s)
+        self._yaw_u = fb.heading_amplitude(stride_s, self.ctrl.alpha)
         self._side_step_update(t, stride_s)
         self._ankle = fb.ankle_offsets()
         self._free_leg = fb.free_leg_offsets(self.ctrl.alpha)
