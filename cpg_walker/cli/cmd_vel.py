@@ -75,9 +75,11 @@ def _drive(args: argparse.Namespace) -> int:
 
     if args.speed_map is not None:
         SpeedMap.load(args.speed_map)  # InputError naming the file, before the drives
+    from cpg_walker.experiments.drive_protocol import drives as protocol_drives
     from cpg_walker.progress import Progress
 
-    prog = Progress(len(drive_set(args.quick)), "drive-check", "drives")
+    prog = Progress(len(drive_set(args.quick)) + (0 if args.quick else len(protocol_drives())), "drive-check",
+                    "drives")
     res = drive_check(args.out, args.jobs, args.quick, args.speed_map, prog)
     prog.close()
     print(open(f"{args.out}/drive_check.md", encoding="utf-8").read())

@@ -280,17 +280,27 @@ def stop_metrics(r, t_last: float) -> dict:
 
 def drive_check(out: str | Path, jobs: int = 2, quick: bool = False, map_file: str | None = None,
                 progress=None) -> dict:
-    """Run ``drive_set``; write DIR/drive_check.json, drive_check.md and drive_check.png."""
+    """Run ``drive_set`` and (not ``quick``) the steering protocol (experiments/drive_protocol.py); write
+    DIR/drive_check.json (``runs``, ``protocol``), drive_check.md and drive_check.png."""
     from functools import partial
 
+    from cpg_walker.experiments import drive_protocol
+
     drives = drive_set(quick)
-    runs = run_many(partial(run_drive, map_file=map_file), drives, jobs=jobs, progress=progress)
+    extra = [] if quick else drive_protocol.drives()
+    runs = run_many(partial(run_drive, map_file=map_file), drives + extra, jobs=jobs, progress=progress)
+    runs, proto_runs = runs[:len(drives)], runs[len(drives):]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     res = {"limits": CmdVelLimits.load().as_dict(),
            "map_file": SpeedMap.load(map_file or default_map_file()).origin, "runs": runs}
+    text = markdown_table(runs)
+    if proto_runs:
+        res["protocol"] = {**drive_protocol.summarize(proto_runs, drive_protocol.leg_length()),
+                           "runs": proto_runs}
+        text += "\n" + drive_protocol.markdown(res["protocol"])
     (out / "drive_check.json").write_text(json.dumps(res, indent=1) + "\n")
-    (out / "drive_check.md").write_text(markdown_table(runs))
+    (out / "drive_check.md").write_text(text)
     plot(runs, out / "drive_check.png")
     return res
 

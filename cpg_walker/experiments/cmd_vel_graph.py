@@ -81,6 +81,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     probe = Probe(domain, "drive_check", parameter_services=False)
     odom: list[tuple[float, float, float, float]] = []
     cmd_state: list[tuple[float, str]] = []
+    applied: list[tuple] = []  # (sim s, cmd_vel state, applied ζ, applied α, turn rate commanded)
     fallen: list[float] = []  # sim s (the newest odometry) when /sim/fallen said true
 
     def on_fallen(m: Bool) -> None:
@@ -102,7 +103,10 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
             if s.name == "cpg_walker/cpg":
                 v = {kv.key: kv.value for kv in s.values}
                 if "cmd_vel" in v:
-                    cmd_state.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, v["cmd_vel"]))
+                    ts = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+                    cmd_state.append((ts, v["cmd_vel"]))
+                    applied.append((round(ts, 3), v["cmd_vel"], *(float(v.get(k, "nan")) for k in (
+                        "zeta", "alpha", "cmd_vel_turn_rate"))))
 
     probe.subscribe(ifc.ODOM_GROUND_TRUTH, Odometry, on_odom, 200)
     probe.subscribe(ifc.ODOM, Odometry, est.on_estimate, 200)
@@ -170,6 +174,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     res["fell"] = bool(fallen)
     res["fell_at_s"] = round(fallen[0], 2) if fallen else None
     res["odometry"] = odometry_error(est)
+    res["applied"] = [list(a) for a in applied]  # cpg_node's /diagnostics, every 0.1 sim s
     res.update(domain_id=domain, attached=attach, plan_name=plan, plan=[list(p) for p in steps],
                stop_s=STOP_S, first_command_s=t0, pacing=None if attach else pacing,
                params=None if attach else list(params or ()))

@@ -327,12 +327,21 @@ class CmdVelFollower:
         self.target: tuple[float, float, float] = (self.zeta, 0.0, 0.0)
         self.target_y = 0.0
         self._turn_out = 0.0  # the turn rate output (slewed at limits.angular_z_rate[_in_place])
+        self.side_step_allowed = True  # False: linear.y is taken as 0 (``allow_side_step``)
         self._reversing = False  # direction swapped, waiting for the applied ζ
         self.reverse_via_stop = True  # False: flip ζ at once (measured against; docs/cmd_vel.md)
         self.alpha_rate: float | None = None  # limit on every rise of the α command (per sim s); None: none
         self.reverse_alpha_rate: float | None = REVERSE_ALPHA_RATE  # ... after a reversal
         self._ramp = False
         self._t_prev, self._alpha_out = 0.0, 1.0
+
+    def allow_side_step(self, allowed: bool) -> None:
+        """Whether linear.y can be followed (cpg_node: not without the ankle pathway); refused, a Twist's
+        linear.y counts as 0 (a side step alone then stands)."""
+        if bool(allowed) != self.side_step_allowed:
+            self.side_step_allowed = bool(allowed)
+            if self.last is not None:
+                self._retarget()
 
     def set_limits(self, limits: CmdVelLimits) -> None:
         self.limits = limits
@@ -358,7 +367,7 @@ class CmdVelFollower:
         (±steer_zeta, steer_alpha). Gentler turns walk at the speed map's (ζ, α)."""
         _, vx, wz = self.last  # type: ignore[misc]
         lim = self.limits
-        wz, vy = lim.clamp_angular(wz), lim.clamp_lateral(self.linear_y)
+        wz, vy = lim.clamp_angular(wz), lim.clamp_lateral(self.linear_y) if self.side_step_allowed else 0.0
         side = abs(vy) >= max(lim.stand_below, 1e-9)
         z, a = self.map.command(vx, lim)
         if a == 0.0:

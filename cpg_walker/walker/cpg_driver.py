@@ -329,15 +329,16 @@ class CPGDriver:
         """Apply the follower's output for tick t_ns (once the CPG has taken over)."""
         if self.cmd.last is None or self.cmd_override or t_ns < self.walk_from_s * 1e9:
             return
+        fb = self.source.fb
+        reason = turn_unavailable(self.feedback_on, self.fade.weight, fb.pathways)
+        side = side_step_unavailable(reason, self.ankle_allowed, fb.pathways)
+        self.cmd.allow_side_step(not side)
         out = self.cmd.update(t_ns / 1e9, self.ctrl.zeta, self.ctrl.alpha)
         if out is None:
             return
         prev = self.cmd_out
-        fb = self.source.fb
-        reason = turn_unavailable(self.feedback_on, self.fade.weight, fb.pathways)
         want = self.cmd.limits.clamp_angular(self.cmd.last[2])
         self.cmd_turn = reason if reason and want != 0.0 else "ok"
-        side = side_step_unavailable(reason, self.ankle_allowed, fb.pathways)
         want_y = self.cmd.limits.clamp_lateral(self.cmd.linear_y)
         self.cmd_side = side if side and want_y != 0.0 else "ok"
         if (reason and out.turn_rate != 0.0) or (side and out.linear_y != 0.0):
