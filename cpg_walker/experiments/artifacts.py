@@ -40,6 +40,8 @@ ARTIFACTS: tuple[Artifact, ...] = (
              ("envelope",), ("envelope.json", "envelope.md", "envelope.png"), 20.0),
     Artifact("pushes", "the largest lateral pushes recovered standing and walking, in-process", ("pushes",),
              ("pushes.json", "pushes.md"), 3.0),
+    Artifact("drive_check", "/cmd_vel commanded vs achieved and the steering protocol, in-process",
+             ("drive-check",), ("drive_check.json", "drive_check.md", "drive_check.png"), 8.0),
     Artifact("random_walks", "100 random command sequences of 120 s through the governor, in-process",
              ("random-walks", "--seeds", "400-499"), ("random_walks.json",), 14.0),
     Artifact("random_walks_default", "50 more random command sequences of 120 s with cpg_node's default "
