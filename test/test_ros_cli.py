@@ -106,6 +106,6 @@ def test_graph_command_ends_by_itself_and_leaves_nothing_behind(tmp_path, ros_do
     assert f"ROS_DOMAIN_ID={ros_domain} (ROS_DOMAIN_ID)" in out
     assert f"ROS_DOMAIN_ID={ros_domain} cpg-walker param set /cpg zeta 0.8" in out
     assert "[cpg] " in out and "[sim] " in out and "sim_node finished; stopping the graph" in out, out[-3000:]
-    assert "stopped: pid_node 0, cpg_node 0, sim_node 0" in out, out[-3000:]
+    assert "stopped: odom_node 0, pid_node 0, cpg_node 0, sim_node 0" in out, out[-3000:]
     assert not left
     assert subprocess.run(["pgrep", "-g", str(p.pid)], capture_output=True).returncode == 1

@@ -70,12 +70,13 @@ def _drive(args: argparse.Namespace) -> int:
         print(open(f"{args.out}/drive_graph.md", encoding="utf-8").read())
         return report_fall("drive-check", [fall_line("drive-check", res.get("fell_at_s"),
                                                      what="driven through the graph")] if res["fell"] else [])
-    from cpg_walker.experiments.cmd_vel import drive_check, drive_set
+    from cpg_walker.experiments.cmd_vel import drive_set
+    from cpg_walker.experiments.drive_protocol import drive_check
     from cpg_walker.walker.cmd_vel import SpeedMap
 
     if args.speed_map is not None:
         SpeedMap.load(args.speed_map)  # InputError naming the file, before the drives
-    from cpg_walker.experiments.drive_protocol import drives as protocol_drives
+    from cpg_walker.experiments.drive_protocol import protocol_drives
     from cpg_walker.progress import Progress
 
     prog = Progress(len(drive_set(args.quick)) + (0 if args.quick else len(protocol_drives())), "drive-check",

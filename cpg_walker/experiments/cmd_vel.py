@@ -3,7 +3,8 @@
 * ``measure_speed_map`` — the forward speed per ζ (α = 1) forward and backward, and per α at ζ = ±1,
   each from standing, over the second half of a ``window_s`` window after the command: the data of
   config/speed_map.yaml (``cpg-walker cmd-vel-map --out DIR`` writes DIR/speed_map.yaml + .json).
-* ``drive_check`` — Twist commands through walker/cmd_vel.py's CmdVelFollower (as cpg_node applies
+* ``run_drive`` / ``drive_set`` (run by experiments/drive_protocol.py ``drive_check``) — Twist commands
+  through walker/cmd_vel.py's CmdVelFollower (as cpg_node applies
   them), commanded vs actual forward speed and turn rate from the base trajectory (the in-process
   /odom/ground_truth), and the stop after the last command (the timeout): DIR/drive_check.json, .md,
   .png (``cpg-walker drive-check --out DIR``).
@@ -159,23 +160,20 @@ class DrivenSource:
         return self.src.targets(t)
 
 
-def run_drive(drive: Drive, map_file: str | None = None) -> dict:
-    """One drive in-process: the trajectory's measured speed/turn per window and the stop."""
+def driven_source(drive: Drive, map_file: str | None = None) -> tuple[DrivenSource, SpeedMap, CmdVelLimits]:
+    """The drive's target source as cpg_node would apply its Twists (the follower, the governor unless
+    ``drive.governed`` is false, the ankle pathway as ``drive.ankle``), with the speed map and limits."""
     from cpg_walker.experiments.walk_runs import _controller
-    from cpg_walker.robot.hoap2 import Hoap2Sim
-    from cpg_walker.robot.pid import PidLaw
     from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
     from cpg_walker.walker.gait_source import FeedbackGaitSource
     from cpg_walker.walker.governor import GovernorConfig
-    from cpg_walker.walker.loop import run_replay
 
     smap = SpeedMap.load(map_file or default_map_file())
     limits = CmdVelLimits.load(**({} if drive.alpha_fall_rate is None
                                   else {"alpha_fall_rate": drive.alpha_fall_rate}))
-    ctrl = _controller()
     fb = FeedbackController(FeedbackConfig.load())
     fb.ankle_allowed = drive.ankle
-    src = FeedbackGaitSource(ctrl, fb, governor=GovernorConfig.load() if drive.governed else None)
+    src = FeedbackGaitSource(_controller(), fb, governor=GovernorConfig.load() if drive.governed else None)
     follower = CmdVelFollower(smap, limits, zeta=1.0)
     follower.reverse_via_stop = drive.reverse_via_stop
     follower.alpha_rate = drive.alpha_rate
@@ -185,11 +183,25 @@ def run_drive(drive: Drive, map_file: str | None = None) -> dict:
         while t < until - 1e-9:
             cmds.append((round(t, 6), vx, wz, vy))
             t += 1.0 / drive.rate_hz
-    t_last = cmds[-1][0]
-    driven = DrivenSource(src, follower, cmds)
+    return DrivenSource(src, follower, cmds), smap, limits
+
+
+def drive_duration(drive: Drive) -> float:
+    """Sim s the drive's walk lasts: its last segment's end plus the tail."""
+    return drive.segments[-1][0] + drive.tail_s
+
+
+def run_drive(drive: Drive, map_file: str | None = None) -> dict:
+    """One drive in-process: the trajectory's measured speed/turn per window and the stop."""
+    from cpg_walker.robot.hoap2 import Hoap2Sim
+    from cpg_walker.robot.pid import PidLaw
+    from cpg_walker.walker.loop import run_replay
+
+    driven, smap, limits = driven_source(drive, map_file)
+    t_last = driven.commands[-1][0]
     sim = Hoap2Sim()
     sim.reset()
-    r = run_replay(sim, driven, PidLaw.from_config(), drive.segments[-1][0] + drive.tail_s)
+    r = run_replay(sim, driven, PidLaw.from_config(), drive_duration(drive))
     out: dict = {"label": drive.label, "fell": bool(r.fell),
                  "fall_time_s": None if r.fall_time_s is None else round(float(r.fall_time_s), 3),
                  "last_command_s": t_last, "timeout_s": limits.timeout, "segments": []}
@@ -276,33 +288,6 @@ def stop_metrics(r, t_last: float) -> dict:
         d = r.base_xy[-1] - _xy_at(r, stopped_at)
         out["drift_after_stop_m"] = round(float(np.linalg.norm(d)), 4)
     return out
-
-
-def drive_check(out: str | Path, jobs: int = 2, quick: bool = False, map_file: str | None = None,
-                progress=None) -> dict:
-    """Run ``drive_set`` and (not ``quick``) the steering protocol (experiments/drive_protocol.py); write
-    DIR/drive_check.json (``runs``, ``protocol``), drive_check.md and drive_check.png."""
-    from functools import partial
-
-    from cpg_walker.experiments import drive_protocol
-
-    drives = drive_set(quick)
-    extra = [] if quick else drive_protocol.drives()
-    runs = run_many(partial(run_drive, map_file=map_file), drives + extra, jobs=jobs, progress=progress)
-    runs, proto_runs = runs[:len(drives)], runs[len(drives):]
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    res = {"limits": CmdVelLimits.load().as_dict(),
-           "map_file": SpeedMap.load(map_file or default_map_file()).origin, "runs": runs}
-    text = markdown_table(runs)
-    if proto_runs:
-        res["protocol"] = {**drive_protocol.summarize(proto_runs, drive_protocol.leg_length()),
-                           "runs": proto_runs}
-        text += "\n" + drive_protocol.markdown(res["protocol"])
-    (out / "drive_check.json").write_text(json.dumps(res, indent=1) + "\n")
-    (out / "drive_check.md").write_text(text)
-    plot(runs, out / "drive_check.png")
-    return res
 
 
 def markdown_table(runs: list[dict]) -> str:

@@ -1,4 +1,5 @@
-"""The steering protocol of ``cpg-walker drive-check`` (in-process, through the follower as cpg_node applies
+"""``cpg-walker drive-check`` (``drive_check``: experiments/cmd_vel.py's drives, then the steering
+protocol) — the protocol (in-process, through the follower as cpg_node applies
 it): each command — forward, backward, sideways, turning in place — raised step by step, ``STEP_S`` sim s
 per step, until the robot falls or the command ends; per step the achieved speed (or turn rate) over its
 second half. Beside it: combined commands, commanded vs achieved, and the kid-size anchors of the issue
@@ -8,9 +9,21 @@ second half. Beside it: combined commands, commanded vs achieved, and the kid-si
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
-from cpg_walker.experiments.cmd_vel import Drive
+from cpg_walker.experiments.cmd_vel import (
+    CmdVelLimits,
+    Drive,
+    SpeedMap,
+    default_map_file,
+    drive_set,
+    markdown_table,
+    plot,
+    run_drive,
+)
+from cpg_walker.experiments.walk_runs import run_many
 
 #: sim s per protocol step
 STEP_S = 10.0
@@ -66,7 +79,7 @@ def combined_drive(cmd: tuple[float, float, float]) -> Drive:
     return Drive(f"combined x {vx:+g} y {vy:+g} z {wz:+g}", ((t0 + COMBINED_S, vx, wz, vy),), t0=t0)
 
 
-def drives() -> list[Drive]:
+def protocol_drives() -> list[Drive]:
     return [axis_drive(n) for n in AXES] + [combined_drive(c) for c in COMBINED]
 
 
@@ -136,3 +149,27 @@ def markdown(p: dict) -> str:
         lines.append(f"| {c['linear_x']:+g}, {c['linear_y']:+g}, {c['angular_z']:+g} | {c['zeta']:g}, "
                      f"{c['alpha']:.3g} | {got} | {'yes' if c['fell'] else 'no'} |")
     return "\n".join(lines) + "\n"
+
+
+def drive_check(out: str | Path, jobs: int = 2, quick: bool = False, map_file: str | None = None,
+                progress=None) -> dict:
+    """Run experiments/cmd_vel.py's ``drive_set`` and (not ``quick``) the steering protocol; write
+    DIR/drive_check.json (``runs``, ``protocol``), drive_check.md and drive_check.png."""
+    from functools import partial
+
+    drives = drive_set(quick)
+    extra = [] if quick else protocol_drives()
+    runs = run_many(partial(run_drive, map_file=map_file), drives + extra, jobs=jobs, progress=progress)
+    runs, proto_runs = runs[:len(drives)], runs[len(drives):]
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    res = {"limits": CmdVelLimits.load().as_dict(),
+           "map_file": SpeedMap.load(map_file or default_map_file()).origin, "runs": runs}
+    text = markdown_table(runs)
+    if proto_runs:
+        res["protocol"] = {**summarize(proto_runs, leg_length()), "runs": proto_runs}
+        text += "\n" + markdown(res["protocol"])
+    (out / "drive_check.json").write_text(json.dumps(res, indent=1) + "\n")
+    (out / "drive_check.md").write_text(text)
+    plot(runs, out / "drive_check.png")
+    return res

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpg_walker.experiments.cmd_vel import Drive, DrivenSource, default_map_file
+from cpg_walker.experiments.cmd_vel import Drive, drive_duration, driven_source
 from cpg_walker.robot.odometry import CONFIG_KEYS, LegOdometry, OdometryConfig
 
 #: s between the samples compared with the truth.
@@ -63,29 +63,6 @@ class OdometryProbe:
         return self.src.targets(t)
 
 
-def driven_source(drive: Drive, map_file: str | None = None) -> tuple[DrivenSource, float]:
-    """The drive's source as experiments/cmd_vel.py run_drive builds it, and the walk's duration."""
-    from cpg_walker.experiments.walk_runs import _controller
-    from cpg_walker.walker.cmd_vel import CmdVelFollower, CmdVelLimits, SpeedMap
-    from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
-    from cpg_walker.walker.gait_source import FeedbackGaitSource
-
-    smap = SpeedMap.load(map_file or default_map_file())
-    limits = CmdVelLimits.load(**({} if drive.alpha_fall_rate is None
-                                  else {"alpha_fall_rate": drive.alpha_fall_rate}))
-    src = FeedbackGaitSource(_controller(), FeedbackController(FeedbackConfig.load()))
-    follower = CmdVelFollower(smap, limits, zeta=1.0)
-    follower.reverse_via_stop = drive.reverse_via_stop
-    follower.alpha_rate = drive.alpha_rate
-    follower.reverse_alpha_rate = drive.reverse_alpha_rate
-    cmds, t = [], drive.t0
-    for until, vx, wz in drive.segments:
-        while t < until - 1e-9:
-            cmds.append((round(t, 6), vx, wz))
-            t += 1.0 / drive.rate_hz
-    return DrivenSource(src, follower, cmds), drive.segments[-1][0] + drive.tail_s
-
-
 def drift(rows: np.ndarray, strides: list[float]) -> dict:
     """The estimate's error against the truth over ``rows`` (OdometryProbe.rows as an array); distance
     and turn summed between the times ``strides`` (e.g. the left touchdowns), the start and the end."""
@@ -126,7 +103,8 @@ def run_odometry(drive: Drive, config: OdometryConfig | None = None, map_file: s
     from cpg_walker.robot.pid import PidLaw
     from cpg_walker.walker.loop import run_replay
 
-    source, duration = driven_source(drive, map_file)
+    source, _, _ = driven_source(drive, map_file)
+    duration = drive_duration(drive)
     sim = Hoap2Sim()
     sim.reset()
     probe = OdometryProbe(source, sim, LegOdometry(config))

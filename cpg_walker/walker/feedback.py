@@ -130,7 +130,12 @@ class FeedbackConfig:
     # ours ("heading")
     heading_gain: float  # hip-yaw amplitude u (rad) per rad of heading error
     heading_limit_rad: float  # |u| clip of the closed loop
-    turn_feedforward: tuple  # [α, c] pairs: c(applied α) of the turn's feedforward u_ff = c·ω·T/4
+    # c(applied α) of the turn's feedforward u_ff = c·ω·T/4: c_short at α <= short_alpha, c_long at α >=
+    # long_alpha, linear in between
+    turn_feedforward_short: float
+    turn_feedforward_short_alpha: float
+    turn_feedforward_long: float
+    turn_feedforward_long_alpha: float
     hip_yaw_limit_rad: float  # |u_fb + u_ff| clip
     # the side step (/cmd_vel linear.y; not a feedback pathway: a command's hip-roll oscillation)
     side_step_gain: float  # hip-roll amplitude (rad) per (m/s of linear.y × s of stride period)
@@ -164,7 +169,7 @@ class FeedbackConfig:
                              f"got {self.heading_reference!r}")
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name in ("lateral_mode", "heading_reference", "turn_feedforward"):
+            if f.name in ("lateral_mode", "heading_reference"):
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise InputError(f"{f.name} must be a finite number, got {v!r}")
@@ -175,7 +180,7 @@ class FeedbackConfig:
                      "ankle_rate_time_constant_s", "ankle_max_sample_age_s", "ankle_fade_s",
                      "heading_time_constant_s", "reset_min_abs_zeta", "reset_min_alpha", "free_leg_gain",
                      "free_leg_stance_gain", "free_leg_threshold_rad", "free_leg_unloaded_n",
-                     "side_step_gain", "side_step_rate"):
+                     "side_step_gain", "side_step_rate", "turn_feedforward_short", "turn_feedforward_long"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 <= self.ankle_limit_rad <= 0.3:
@@ -189,15 +194,10 @@ class FeedbackConfig:
                              f"got {self.free_leg_limit_rad}")
         if not 0.0 < self.free_leg_max_alpha <= 1.0:
             raise InputError(f"free_leg_max_alpha must be in (0, 1], got {self.free_leg_max_alpha}")
-        try:
-            ff = np.asarray(self.turn_feedforward, dtype=float)
-        except (TypeError, ValueError):
-            ff = np.zeros((0,))
-        if ff.ndim != 2 or ff.shape[1] != 2 or len(ff) < 1 or not np.all(np.isfinite(ff)) or np.any(
-                np.diff(ff[:, 0]) <= 0) or np.any(ff[:, 1] < 0) or np.any((ff[:, 0] < 0) | (ff[:, 0] > 2)):
-            raise InputError(f"turn_feedforward must be [alpha, c] pairs, alpha increasing in [0, 2], "
-                             f"c >= 0; got {self.turn_feedforward!r}")
-        object.__setattr__(self, "turn_feedforward", tuple(tuple(float(x) for x in p) for p in ff))
+        if not 0.0 <= self.turn_feedforward_short_alpha < self.turn_feedforward_long_alpha <= 2.0:
+            raise InputError(f"turn_feedforward_short_alpha must be below turn_feedforward_long_alpha, both "
+                             f"in [0, 2]; got {self.turn_feedforward_short_alpha} / "
+                             f"{self.turn_feedforward_long_alpha}")
         if not 0.0 <= self.side_step_limit_rad <= 0.3:
             raise InputError(f"side_step_limit_rad must be in [0, 0.3] rad (hip-roll offsets), "
                              f"got {self.side_step_limit_rad}")
@@ -546,15 +546,17 @@ class FeedbackController:
         closed loop u_fb = heading_gain·e (|u_fb| <= heading_limit_rad) plus the commanded turn's
         feedforward u_ff = c·ω·T/4 (T = ``stride_s``, the stride period: each stance hip turns the pelvis
         by 2u per step, two steps per stride, so u = ω·T/4 without slip; c > 1 makes up the measured slip,
-        larger on the shorter steps of a small applied ``alpha``: turn_feedforward's [α, c] pairs,
-        linear between, held outside), the sum clipped to hip_yaw_limit_rad."""
+        larger on the shorter steps of a small applied ``alpha``: turn_feedforward_short up to
+        turn_feedforward_short_alpha, turn_feedforward_long from turn_feedforward_long_alpha, linear
+        between), the sum clipped to hip_yaw_limit_rad."""
         if "heading" not in self.pathways or self.heading_ref is None:
             return 0.0
         cfg = self.cfg
         lim = cfg.heading_limit_rad
         u = min(max(cfg.heading_gain * self.heading_error, -lim), lim)
         if self.turn_rate:
-            a, c = zip(*cfg.turn_feedforward, strict=True)
-            u += float(np.interp(alpha, a, c)) * self.turn_rate * stride_s / 4.0
+            c = float(np.interp(alpha, (cfg.turn_feedforward_short_alpha, cfg.turn_feedforward_long_alpha),
+                                (cfg.turn_feedforward_short, cfg.turn_feedforward_long)))
+            u += c * self.turn_rate * stride_s / 4.0
         lim = cfg.hip_yaw_limit_rad
         return self._weight * min(max(u, -lim), lim)
