@@ -42,7 +42,7 @@ ARTIFACTS: tuple[Artifact, ...] = (
              ("pushes.json", "pushes.md"), 3.0),
     Artifact("drive_check", "/cmd_vel commanded vs achieved and the steering protocol, in-process",
              ("drive-check",), ("drive_check.json", "drive_check.md", "drive_check.png"), 8.0),
-    Artifact("steer_graph", "turning in place, side step, forward through the realtime graph by a Twist client",
+    Artifact("steer_graph", "turn in place, side step, forward through the realtime graph by a Twist client",
              ("drive-check", "--graph", "--plan", "steer", "--pacing", "realtime"),
              ("drive_graph.json", "drive_graph.md"), 2.0),
     Artifact("random_walks", "100 random command sequences of 120 s through the governor, in-process",
