@@ -250,18 +250,25 @@ def trajectory_rates(r, t0: float, t1: float, chunk_s: float = 1.0) -> dict:
             "turn_rate_rad_s": round(dh / span, 4), "turn_rate_deg_s": round(math.degrees(dh / span), 2)}
 
 
-def whole_segment(r, t0: float, t1: float) -> dict:
-    """Over all of a segment (from its command on): the angle turned (the unwrapped yaw's change) and the
-    displacement along and across the heading (1 s pieces, each along its mean heading)."""
-    i0, i1 = (min(int(np.searchsorted(r.t, x)), len(r.t) - 1) for x in (t0, t1))
-    edges = np.append(np.arange(t0, t1 - 1e-9, 1.0), t1)
+def moved(t: np.ndarray, xy: np.ndarray, yaw: np.ndarray, a: float, b: float) -> tuple[float, float]:
+    """(forward, sideways) displacement of a base trajectory (times ``t``, positions ``xy``, unwrapped
+    ``yaw``) between times a and b: 1 s pieces, each along (and across) its mean heading."""
     fwd = side = 0.0
-    for a, b in itertools.pairwise(edges):
-        ia, ib = (min(int(np.searchsorted(r.t, x)), len(r.t) - 1) for x in (a, b))
-        h = float(np.mean(r.heading[ia:ib + 1]))
-        d = r.base_xy[ib] - r.base_xy[ia]
+    edges = np.append(np.arange(a, b - 1e-9, 1.0), b)
+    for c0, c1 in itertools.pairwise(edges):
+        i0, i1 = (min(int(np.searchsorted(t, c)), len(t) - 1) for c in (c0, c1))
+        h = float(np.mean(yaw[i0:i1 + 1]))
+        d = xy[i1] - xy[i0]
         fwd += float(d @ [math.cos(h), math.sin(h)])
         side += float(d @ [-math.sin(h), math.cos(h)])
+    return fwd, side
+
+
+def whole_segment(r, t0: float, t1: float) -> dict:
+    """Over all of a segment (from its command on): the angle turned (the unwrapped yaw's change) and the
+    displacement along and across the heading (``moved``)."""
+    i0, i1 = (min(int(np.searchsorted(r.t, x)), len(r.t) - 1) for x in (t0, t1))
+    fwd, side = moved(r.t, r.base_xy, r.heading, t0, t1)
     return {"turned_rad": round(float(r.heading[i1] - r.heading[i0]), 3), "forward_m": round(fwd, 3),
             "sideways_m": round(side, 3)}
 

@@ -11,7 +11,6 @@ whether and about when (the newest odometry then) the robot fell. DIR/drive_grap
 
 from __future__ import annotations
 
-import itertools
 import json
 import math
 import os
@@ -23,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.errors import InputError
+from cpg_walker.experiments.cmd_vel import moved
 from cpg_walker.nodes import interface as ifc
 
 #: (name, duration s, linear.x, angular.z, settle s[, linear.y]) after the start, then ``STOP_S`` without
@@ -205,20 +205,6 @@ def _segment(steps: tuple, dt: float):
     return None
 
 
-def _moved(t: np.ndarray, xy: np.ndarray, yaw: np.ndarray, a: float, b: float) -> tuple[float, float]:
-    """(forward, sideways) displacement between sim times a and b: 1 s pieces, each along (and across)
-    its mean heading."""
-    fwd = side = 0.0
-    edges = np.append(np.arange(a, b - 1e-9, 1.0), b)
-    for c0, c1 in itertools.pairwise(edges):
-        i0, i1 = np.searchsorted(t, c0), min(np.searchsorted(t, c1), len(t) - 1)
-        h = float(np.mean(yaw[i0:i1 + 1]))
-        d = xy[i1] - xy[i0]
-        fwd += float(d @ [math.cos(h), math.sin(h)])
-        side += float(d @ [-math.sin(h), math.cos(h)])
-    return fwd, side
-
-
 def _at(t: np.ndarray, v: np.ndarray, s: float):
     return v[min(int(np.searchsorted(t, s)), len(t) - 1)]
 
@@ -231,12 +217,12 @@ def measure(odom: np.ndarray, t0: float, sent: list, cmd_state: list, steps: tup
     start = t0
     for name, dur, vx, wz, settle, *more in steps:
         vy = more[0] if more else 0.0
-        whole = _moved(t, xy, yaw, start, start + dur)
+        whole = moved(t, xy, yaw, start, start + dur)
         turned = float(_at(t, yaw, start + dur) - _at(t, yaw, start))
         a, b = start + settle, start + dur
         sel = (t >= a) & (t <= b)
         rate = float(np.polyfit(t[sel], yaw[sel], 1)[0]) if sel.sum() > 10 else float("nan")
-        fwd, side = _moved(t, xy, yaw, a, b)
+        fwd, side = moved(t, xy, yaw, a, b)
         span = b - a
         rows.append({"window": name, "from_s": round(a, 2), "to_s": round(b, 2), "linear_x": vx,
                      "linear_y": vy, "angular_z": wz, "speed_mps": round(fwd / span, 4),
