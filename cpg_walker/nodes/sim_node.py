@@ -24,6 +24,7 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Bool, String
@@ -426,10 +427,18 @@ class SimNode(Node):
         from its first period (a cpg_node started late under load was found 0.7 sim s in, in lockstep)."""
         name = self.wait_subscriber
         since = None  # wall time from which every node of that name seen has subscribed
+
+        def records(topic: str, info) -> bool:
+            # a subscription of that node; on /clock a reliable one: a recorder under use_sim_time also has
+            # its time source's best-effort /clock subscription, which is not the recording's (counted as
+            # the recording's, the first /clock went out before the recorder subscribed to it, in CI)
+            return info.node_name == name and (
+                topic != ifc.CLOCK or info.qos_profile.reliability == ReliabilityPolicy.RELIABLE)
+
         while rclpy.ok():
             nodes = max(1, sum(n == name for n, _ in self.get_node_names_and_namespaces()))
             missing = [t for t in topics  # every node of that name (e.g. a second recorder)
-                       if sum(i.node_name == name for i in self.get_subscriptions_info_by_topic(t)) < nodes]
+                       if sum(records(t, i) for i in self.get_subscriptions_info_by_topic(t)) < nodes]
             now = time.monotonic()
             since = None if missing else (since or now)
             # held for SUBSCRIBER_SETTLE_S: a second node of that name still being discovered (a recorder
