@@ -201,19 +201,47 @@ def estimate_period(gait: Gait, settle: float | None = None, lo: float = 1.5, hi
     if not legs:
         raise InputError(f"{gait.source}: no leg joints in the recording; cannot find a gait cycle")
     start = int((settle if settle is not None else 0.25 * gait.duration) / gait.dt)
-    q = gait.q[start:, legs]
-    q = q - q.mean(0)
-    best, best_lag = -np.inf, None
-    for lag in range(int(lo / gait.dt), min(int(hi / gait.dt), len(q) - int(1.0 / gait.dt))):
-        a, b = q[:-lag], q[lag:]
-        c = float((a * b).sum() / math.sqrt((a * a).sum() * (b * b).sum() + 1e-300))
-        if c > best:
-            best, best_lag = c, lag
-    if best_lag is None or best < 0.8:
+    period, best = autocorrelation_period(gait.q[start:, legs], gait.dt, lo, hi, keep_s=1.0)
+    if period is None or best < 0.8:
         raise InputError(
             f"{gait.source}: no periodic gait found between {lo} and {hi} s (best correlation {best:.2f})"
         )
-    return best_lag * gait.dt
+    return period
+
+
+def autocorrelation_period(q: np.ndarray, dt: float, lo: float, hi: float, keep_s: float,
+                           refine: bool = False, dip: float | None = None) -> tuple[float | None, float]:
+    """(period s, its normalised autocorrelation) of uniform samples ``q`` (n, k), the lag in [lo, hi] s
+    whose overlap is at least ``keep_s`` long that correlates best (None, -inf when there is none).
+    ``refine``: the peak placed between samples by a parabola through its neighbours (at most half a
+    sample away). ``dip``: only lags past the first one correlating below ``dip`` count (a slowly
+    drifting signal, which correlates well at every short lag, then has no period)."""
+    q = q - q.mean(0)
+
+    def corr(lag: int) -> float:
+        a, b = q[:-lag], q[lag:]
+        return float((a * b).sum() / math.sqrt((a * a).sum() * (b * b).sum() + 1e-300))
+
+    first, last = max(1, int(lo / dt)), min(int(hi / dt), len(q) - int(keep_s / dt))
+    if dip is not None:
+        lag = 1
+        while lag < last and corr(lag) >= dip:
+            lag += 1
+        first = max(first, lag)
+    best, best_lag = -np.inf, None
+    for lag in range(first, last):
+        c = corr(lag)
+        if c > best:
+            best, best_lag = c, lag
+    if best_lag is None:
+        return None, best
+    lag = float(best_lag)
+    if refine and best_lag > 1 and best_lag + 1 < len(q):
+        left, right = corr(best_lag - 1), corr(best_lag + 1)
+        curve = left - 2 * best + right
+        if curve < 0:
+            lag += min(0.5, max(-0.5, 0.5 * (left - right) / curve))
+    return lag * dt, best
 
 
 def find_steady_cycle(gait: Gait, tail: float = 0.8, spread: float = 0.15, window: float = 0.03) -> Cycle:

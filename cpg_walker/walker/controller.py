@@ -166,10 +166,20 @@ class TeachingCycle:
         return np.abs(C[: kmax + 1]).T
 
 
-def teaching_cycle(gait_name: str = "walk") -> TeachingCycle:
-    """The steady stride of a packaged recording (or CSV) as a periodic teaching signal."""
+def cycle_from_samples(gait: str, start: float, q: np.ndarray, dt: float) -> TeachingCycle:
+    """A TeachingCycle from one period of uniform samples ``q`` (n, 10), the first at ``start``: periodic
+    cubic spline closed on the first sample (the recorded walk's seam: 4e-4 rad)."""
     from scipy.interpolate import CubicSpline
 
+    n = len(q)
+    tt = np.arange(n + 1) * dt
+    closed = np.concatenate([q, q[:1]], axis=0)
+    spline = CubicSpline(tt, closed, axis=0, bc_type="periodic")
+    return TeachingCycle(gait, float(start), float(n * dt), q, dt, spline)
+
+
+def teaching_cycle(gait_name: str = "walk") -> TeachingCycle:
+    """The steady stride of a packaged recording (or CSV) as a periodic teaching signal."""
     from cpg_walker.robot.gait_data import find_steady_cycle, load_gait
 
     gait = load_gait(gait_name)
@@ -180,10 +190,7 @@ def teaching_cycle(gait_name: str = "walk") -> TeachingCycle:
     i0 = round(cyc.start / gait.dt)
     n = round(cyc.period / gait.dt)
     q = np.stack([gait.column(j)[i0 : i0 + n] for j in DOFS], axis=1)
-    tt = np.arange(n + 1) * gait.dt
-    closed = np.concatenate([q, q[:1]], axis=0)  # close the loop on the first sample (seam 4e-4 rad)
-    spline = CubicSpline(tt, closed, axis=0, bc_type="periodic")
-    return TeachingCycle(gait.name, float(cyc.start), float(n * gait.dt), q, gait.dt, spline)
+    return cycle_from_samples(gait.name, cyc.start, q, gait.dt)
 
 
 def harmonic_seed_omegas(cycle: TeachingCycle, s: HumanoidSettings) -> np.ndarray:
@@ -264,24 +271,8 @@ class HumanoidCPG:
         import time
 
         s = settings
-        p = CPGParams(params.mu, params.gamma, params.epsilon, params.eta, params.tau, 0.0)
         cyc = teaching_cycle(gait)
-        offset = cyc.q.mean(axis=0)
-        rms = np.sqrt(np.mean((cyc.q - offset) ** 2, axis=0))
-        gain = rms / s.normalised_rms
-        c = cyc.omega / s.reference_omega
-        om0 = harmonic_seed_omegas(cyc, s)
-        net = cls.build_network(om0, p, c, offset, gain)
-        # The Hip2–Hip2 link is present while learning too: a locked coupling term τ·sin θ = τ·x/r also
-        # pushes the radius (r² -> μ + τ/2γ), so α must be learned with the coupling that plays it back.
-        # It is fixed (learn_phase=False): its φ is π throughout, not learned by eq 13.
-        cls.couple_legs(net)
-        fastest = float(om0.max()) * c / min(1.0, s.harmonic_seed_factor)  # rad/s
-        dt_max = 2 * math.pi / (s.steps_per_fastest_period * fastest)
-        dt_max = min(dt_max, 0.9 * MAX_RATE_STEP / (c * 2 * p.gamma * p.mu))  # radial rate, 10 % margin
-        per_stride = math.ceil(cyc.period / dt_max)
-        dt = cyc.period / per_stride
-        net.check_step(dt)
+        net, dt, per_stride, rms = cls.learning_network(cyc, s, params)
         history: list[dict] = []
         wall0 = time.perf_counter()
         prev = None
@@ -300,9 +291,9 @@ class HumanoidCPG:
             strides += chunk
             net.t = strides * cyc.period  # keep the clock on the stride grid (no rounding drift)
             err = np.sqrt(err_sq / per_stride)
-            snap = _snapshot(net, err)
+            snap = snapshot(net, err)
             if prev is not None:
-                ok, deltas = _stable(prev, snap, rms, s)
+                ok, deltas = stable(prev, snap, rms, s)
                 good = good + 1 if ok else 0
                 history.append({"strides": strides, "rms_error_deg": np.degrees(err).round(4).tolist(),
                                 **deltas})
@@ -313,24 +304,50 @@ class HumanoidCPG:
                 converged = True
                 break
         wall = time.perf_counter() - wall0
-        phase_zero = net.state[:2].copy()
-        net.freeze()
-        meta = {
-            "teaching": {
-                "gait": cyc.gait, "cycle_start_s": cyc.start, "cycle_period_s": cyc.period,
-                "recorded_gait_frequency_hz": 1.0 / cyc.period,
-                "description": "the recording's last full steady stride, repeated periodically",
-            },
-            "learning": {
-                "converged": converged, "strides": strides, "learn_time_s": strides * cyc.period,
-                "dt_s": dt, "wall_time_s": round(wall, 3),
-                "criterion": _criterion_text(s),
-            },
-        }
-        ctrl = cls(net, meta, phase_zero, s)
-        ctrl.meta["learning"]["gait_frequency_hz"] = ctrl.gait_frequency_hz()
+        teaching = {"gait": cyc.gait, "cycle_start_s": cyc.start, "cycle_period_s": cyc.period,
+                    "recorded_gait_frequency_hz": 1.0 / cyc.period,
+                    "description": "the recording's last full steady stride, repeated periodically"}
+        learning = {"converged": converged, "strides": strides, "learn_time_s": strides * cyc.period,
+                    "dt_s": dt, "wall_time_s": round(wall, 3)}
+        ctrl = cls.from_learning(net, s, teaching, learning)
         report = LearnReport(converged, strides, strides * cyc.period, dt, wall, history)
         return ctrl, report
+
+    @classmethod
+    def learning_network(cls, cyc: TeachingCycle, s: HumanoidSettings,
+                         params: CPGParams) -> tuple[CPGNetwork, float, int, np.ndarray]:
+        """The network that learns ``cyc`` (eqs 4–13), seeded on its harmonics, and how: (network, RK4 step
+        dt, steps per stride, each DOF's teaching RMS). Shared by ``learn`` and live teaching."""
+        p = CPGParams(params.mu, params.gamma, params.epsilon, params.eta, params.tau, 0.0)
+        offset = cyc.q.mean(axis=0)
+        rms = np.sqrt(np.mean((cyc.q - offset) ** 2, axis=0))
+        gain = rms / s.normalised_rms
+        c = cyc.omega / s.reference_omega
+        om0 = harmonic_seed_omegas(cyc, s)
+        net = cls.build_network(om0, p, c, offset, gain)
+        # The Hip2–Hip2 link is present while learning too: a locked coupling term τ·sin θ = τ·x/r also
+        # pushes the radius (r² -> μ + τ/2γ), so α must be learned with the coupling that plays it back.
+        # It is fixed (learn_phase=False): its φ is π throughout, not learned by eq 13.
+        cls.couple_legs(net)
+        fastest = float(om0.max()) * c / min(1.0, s.harmonic_seed_factor)  # rad/s
+        dt_max = 2 * math.pi / (s.steps_per_fastest_period * fastest)
+        dt_max = min(dt_max, 0.9 * MAX_RATE_STEP / (c * 2 * p.gamma * p.mu))  # radial rate, 10 % margin
+        per_stride = math.ceil(cyc.period / dt_max)
+        dt = cyc.period / per_stride
+        net.check_step(dt)
+        return net, dt, per_stride, rms
+
+    @classmethod
+    def from_learning(cls, net: CPGNetwork, s: HumanoidSettings, teaching: dict,
+                      learning: dict) -> HumanoidCPG:
+        """Freeze a learning network whose state is at the teaching cycle's phase 0 into a controller;
+        ``teaching`` and ``learning`` become its meta (the criterion and the learned frequency added)."""
+        phase_zero = net.state[:2].copy()
+        net.freeze()
+        meta = {"teaching": dict(teaching), "learning": {**learning, "criterion": _criterion_text(s)}}
+        ctrl = cls(net, meta, phase_zero, s)
+        ctrl.meta["learning"]["gait_frequency_hz"] = ctrl.gait_frequency_hz()
+        return ctrl
 
     # ------------------------------------------------------------------ facts
     @property
@@ -489,11 +506,13 @@ class HumanoidCPG:
 
 
 # --------------------------------------------------------------------------------------- helpers
-def _snapshot(net: CPGNetwork, err: np.ndarray) -> dict:
+def snapshot(net: CPGNetwork, err: np.ndarray) -> dict:
+    """What the convergence criterion compares between chunks (``stable``): ω, α, φ and the RMS error."""
     return {"omega": net.omega.copy(), "alpha": net.alpha.copy(), "phi": net.phi.copy(), "err": err}
 
 
-def _stable(prev: dict, cur: dict, teach_rms: np.ndarray, s: HumanoidSettings) -> tuple[bool, dict]:
+def stable(prev: dict, cur: dict, teach_rms: np.ndarray, s: HumanoidSettings) -> tuple[bool, dict]:
+    """The convergence criterion between two chunks' snapshots (``_criterion_text``): (met, changes)."""
     amax = np.max(np.abs(cur["alpha"]), axis=1, keepdims=True)
     active = np.abs(cur["alpha"]) >= s.active_fraction * amax
     active[:, 0] = True

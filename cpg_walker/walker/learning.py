@@ -17,6 +17,7 @@ from cpg_walker.errors import InputError
 from cpg_walker.paths import config_path, ros_parameters
 from cpg_walker.walker import storage
 from cpg_walker.walker.controller import HumanoidCPG, HumanoidSettings
+from cpg_walker.walker.live_teaching import LiveTeachingConfig
 
 LEARNING_CONFIG = "cpg_humanoid_learning.yaml"
 #: The packaged learned CPG's name in config/ (``cpg-walker learn`` writes it; with --install into the
@@ -52,6 +53,12 @@ def learning_settings(n_oscillators: int | None = None,
     settings = HumanoidSettings.from_mapping(h, LEARNING_CONFIG)
     params = CPGParams(**{k: float(v) for k, v in cfg["cpg"].items()}, amplitude_time_constant=0.0)
     return settings, params
+
+
+def live_teaching_config(cfg: dict | None = None) -> LiveTeachingConfig:
+    """The learning YAML's ``live`` section: how cpg_node judges a teaching stream."""
+    cfg = cfg or load_learning_config()
+    return LiveTeachingConfig.from_mapping(dict(cfg.get("live") or {}), LEARNING_CONFIG)
 
 
 def resolve_cpg_file(cpg_file: str | Path) -> Path:
