@@ -174,3 +174,87 @@ def test_the_settings_are_checked():
         LiveTeachingConfig.from_mapping({**good, "window_s": 8.0}, "x")
     with pytest.raises(InputError, match=r"missing key\(s\) \['stall_s'\]"):
         LiveTeachingConfig.from_mapping({k: v for k, v in good.items() if k != "stall_s"}, "x")
+
+
+def test_the_driver_learns_from_teach_samples_takes_over_and_saves(tmp_path):
+    """CPGDriver (cpg_node's logic) standing at α 0 (the gait fixed by its commands, no physics): taught
+    the slow walk at 10 teacher s per sim s (a teacher at --rate 10 on a realtime sim), take-over is refused
+    with the reason until the learning converges; then the taught network walks, phase-matched and
+    cross-faded (no jump in the targets), and is saved as a file cpg_file loads (starting from standing)."""
+    from cpg_walker.walker import storage
+    from cpg_walker.walker.cmd_vel import CmdVelLimits, SpeedMap
+    from cpg_walker.walker.cpg_driver import CPGDriver, FeedbackFade
+    from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController, default_pathways
+    from cpg_walker.walker.gait_source import CPGGaitSource
+    from cpg_walker.walker.learning import cpg_defaults, load_controller
+
+    class Out:
+        def __init__(self):
+            self.sent, self.logs = [], []
+
+        def targets(self, t_ns, q, qd):
+            self.sent.append((t_ns, q.copy()))
+
+        def horizon(self, *a):
+            pass
+
+        def monitor(self, *a):
+            pass
+
+        def log(self, level, text, key=None):
+            self.logs.append((level, text))
+
+    clock = {"now": 0.0}
+    out = Out()
+    d = CPGDriver(load_controller(cpg_defaults()["cpg_file"])[0], out,
+                  feedback=FeedbackController(FeedbackConfig.load(), default_pathways()), feedback_on=False,
+                  fade=FeedbackFade(0.5, 0.05), zeta=1.0, alpha=0.0, speed_map=SpeedMap.load(),
+                  cmd_vel_limits=CmdVelLimits.load(), teacher=_teacher(), teach_steps=4,
+                  wall=lambda: clock["now"])
+    d.warm_up()
+    stream = TeachingStream("slow")
+    period_ns, rate = 2_000_000, 10
+    t_ns, k = 0, 0
+    with pytest.raises(ValueError, match="no taught network has converged yet: teaching is idle"):
+        d.take_over()
+    while d.teacher.result is None and t_ns < 100_000_000_000:
+        clock["now"] = t_ns / 1e9
+        teach_t = k * SAMPLE_DT
+        while teach_t <= rate * t_ns / 1e9:  # the samples due by now at the teacher's rate
+            d.teach(teach_t, DOFS, list(stream.at(teach_t)))
+            k += 1
+            teach_t = k * SAMPLE_DT
+        d.clock(t_ns)
+        t_ns += period_ns
+        if t_ns == 20_000_000_000:
+            with pytest.raises(ValueError, match="no taught network has converged yet: teaching is learning"):
+                d.take_over()
+            assert d.status(t_ns)["teaching"] == "learning"
+    info = d.teacher.result_info
+    assert info["learned_frequency_hz"] == pytest.approx(stream.frequency_hz, rel=0.01)
+    assert any("live teaching converged" in text for _, text in out.logs)
+    status = d.status(t_ns)
+    assert status["teaching"] == "converged" and float(status["taught_learned_frequency_hz"]) == \
+        pytest.approx(info["learned_frequency_hz"], rel=1e-5)  # as printed (6 digits)
+    old_offset = d.ctrl.net.offset.copy()
+    d.command(1.0, 1.0)  # step off, then take over while walking
+    for _ in range(3000):
+        d.clock(t_ns)
+        t_ns += period_ns
+    before = len(out.sent)
+    message = d.take_over()
+    assert "took over" in message and d.ctrl.meta["teaching"]["phase"] == "stream"
+    for _ in range(2000):
+        d.clock(t_ns)
+        t_ns += period_ns
+    q = np.array([q for _, q in out.sent[before - 5:]])
+    steps = np.abs(np.diff(q, axis=0)).max()
+    assert steps < 0.01, steps  # rad per 2 ms: continuous through the hand-over (the gait: ~0.002)
+    assert not np.allclose(d.ctrl.net.offset, old_offset)  # the slow walk's posture now
+    assert d.summary()["teaching"]["took_over"] == 1
+    path = d.save_taught(tmp_path / "taught.yaml")
+    saved = storage.load(path)
+    assert saved.gait_frequency_hz() == pytest.approx(info["learned_frequency_hz"])
+    assert CPGGaitSource(saved).transition == "standing"  # its phase 0 is the stream's, not the recording's
+    work = d.summary()["teaching"]["work_ms"]
+    assert work is not None and work["max"] > 0

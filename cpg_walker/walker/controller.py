@@ -417,6 +417,33 @@ class HumanoidCPG:
         self.dof_scale = scale.copy()
         self.net.set_amplitude_scale(float(self._af[-1]) * self.dof_scale)
 
+    def unit_pattern(self, x: np.ndarray | None = None) -> np.ndarray:
+        """The oscillating part of the 10 DOFs' targets at amplitude 1, gain·Σ α_learned x (offsets and
+        modulation left out: what identifies a phase), of the oscillator states ``x`` (…, 10, N; default
+        the current)."""
+        x = self.net.x if x is None else x
+        return self.net.gain * np.einsum("bi,...bi->...b", self.alpha_learned, x)
+
+    def match_phase(self, pattern: np.ndarray, points: int = 256) -> float:
+        """Put the oscillators at the phase of their cycle (at ζ = 1, from phase 0) whose ``unit_pattern`` is
+        nearest (least squares) to ``pattern`` (another network's, at a hand-over), among ``points`` phases
+        per period; returns that phase as s after phase 0."""
+        net = self.net
+        zf, af = self._zf.copy(), self._af.copy()
+        net.state[:2] = self.phase_zero_state
+        net.set_frequency_scale(1.0)
+        net.set_amplitude_scale(1.0)
+        h = self.period / points
+        states = np.empty((points, *self.phase_zero_state.shape))
+        for k in range(points):
+            states[k] = net.state[:2]
+            net.step(h)
+        k = int(np.argmin(np.sum((self.unit_pattern(states[:, 0]) - pattern) ** 2, axis=1)))
+        net.state[:2] = states[k]
+        net.set_frequency_scale(float(zf[-1]))
+        net.set_amplitude_scale(float(af[-1]) * self.dof_scale)
+        return k * h
+
     @property
     def zeta(self) -> float:
         """ζ currently applied (filtered)."""

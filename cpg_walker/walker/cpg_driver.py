@@ -32,6 +32,7 @@ from cpg_walker.walker.controller import HumanoidCPG
 from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
 from cpg_walker.walker.gait_source import FeedbackGaitSource, smootherstep, stop_fade
 from cpg_walker.walker.governor import GovernorConfig
+from cpg_walker.walker.live_teaching import CONVERGED, IDLE, REFUSED, LiveTeacher
 
 #: Sensor samples kept per topic, by stamp (lockstep takes the one stamped like its tick).
 SENSOR_KEEP = 32
@@ -164,8 +165,15 @@ class CPGDriver:
                  monitor_period_ns: int = 100_000_000, horizon_s: float = 0.0, horizon_stop_s: float = 0.0,
                  horizon_step_ns: int = 40_000_000, rejoin_settle_ns: int = 0, lockstep: bool = False,
                  ankle_in_realtime: bool = False, sensor_wait_s: float = 0.4,
-                 governor: GovernorConfig | None = None, wall: Callable[[], float] = time.monotonic) -> None:
+                 governor: GovernorConfig | None = None, wall: Callable[[], float] = time.monotonic,
+                 teacher: LiveTeacher | None = None, teach_steps: int = 2,
+                 teach_blend_s: float = 2.0) -> None:
         self.out, self.wall, self.governor_config = out, wall, governor
+        self.teacher = teacher  # live teaching (/cpg/teach), None: off
+        self.teach_steps, self.teach_blend_s = int(teach_steps), float(teach_blend_s)
+        self.teach_counts = {"received": 0, "took_over": 0, "saved": 0}
+        self.teach_work: deque[float] = deque(maxlen=10_000)  # wall s of learning per call (flat memory)
+        self._teach_logged: tuple[str, str] | None = None
         self.ctrl = ctrl
         self.learned_network = storage.to_dict(ctrl)  # the loaded network, to start over from (a sim reset)
         self.zeta, self.alpha = float(zeta), float(alpha)  # the commanded values (the parameters')
@@ -257,6 +265,8 @@ class CPGDriver:
             spare.forecast(offsets)
             spare.forecast(offsets, fade)
         state_vector(spare)
+        if self.teacher is not None:
+            self.teacher.warm_up()
         return time.perf_counter() - t0
 
     # ---------------------------------------------------------------- commands
@@ -529,6 +539,7 @@ class CPGDriver:
         if self.waiting:
             self._run_waiting()
         self._flush_monitor()
+        self._teach_step()
 
     # ---------------------------------------------------------------- ticks
     def _tick(self, t_ns: int) -> None:
@@ -560,6 +571,7 @@ class CPGDriver:
             self.monitor_due = (t_ns, state_vector(self.ctrl), self.status(t_ns))
             self.next_monitor_ns = t_ns + self.monitor_period_ns
         self.timing.tick(w0, t_ns, time.perf_counter() - w0)  # overrun: work longer than the period
+        self._teach_step()  # after the tick's targets are out: learning never delays them
 
     def _targets(self, t_ns: int) -> None:
         cached = self.recent.get(t_ns)
@@ -604,6 +616,105 @@ class CPGDriver:
         if due is not None:
             self.out.monitor(*due)
 
+    # ---------------------------------------------------------------- live teaching
+    def teach(self, t_s: float, names, positions) -> None:
+        """A teaching sample (/cpg/teach: teacher time ``t_s``, joint names and positions)."""
+        if self.teacher is None:
+            return
+        self.teach_counts["received"] += 1
+        self.teacher.add(t_s, names, positions, now=self.wall())
+        self._teach_report()
+
+    def _teach_step(self) -> None:
+        """At most ``teach_steps`` learning steps (after a tick's output, and between messages)."""
+        teacher = self.teacher
+        if teacher is None or teacher.state in (IDLE, CONVERGED, REFUSED):
+            return
+        w0 = time.perf_counter()
+        teacher.stalled(self.wall())
+        if teacher.advance(self.teach_steps):
+            self.teach_work.append(time.perf_counter() - w0)
+        self._teach_report()
+
+    def _teach_report(self) -> None:
+        teacher = self.teacher
+        now = (teacher.state, teacher.reason)
+        if now == self._teach_logged:
+            return
+        self._teach_logged = now
+        if teacher.state == REFUSED:
+            self.out.log("warn", f"live teaching refused: {teacher.reason}; the walking network is untouched")
+        elif teacher.state == CONVERGED:
+            info = teacher.result_info
+            self.out.log("info", f"live teaching converged after {info['converged_after_s']:.1f} teacher s "
+                         f"({info['strides']} strides): {info['learned_frequency_hz']:.4f} Hz learned, "
+                         f"the stream's {info['teacher_frequency_hz']:.4f} Hz")
+        elif teacher.state != IDLE:
+            self.out.log("info", f"live teaching: {teacher.state}")
+
+    def taught(self) -> HumanoidCPG:
+        """A copy of the last converged live-taught network, ready to walk and to be saved: its posture
+        recording (the joints the CPG does not drive, the standing crouch) the walking network's, its
+        phase 0 the stream's (``phase: stream``: it starts from standing, not from the recording's steps).
+        ValueError with the reason when there is none."""
+        teacher = self.teacher
+        if teacher is None:
+            raise ValueError("live teaching is off (cpg_node's teach parameter)")
+        if teacher.result is None:
+            why = f" ({teacher.reason})" if teacher.reason else ""
+            raise ValueError(f"no taught network has converged yet: teaching is {teacher.state}{why}")
+        ctrl = storage.from_dict(storage.to_dict(teacher.result))
+        walking = self.ctrl.meta["teaching"]
+        ctrl.meta["teaching"].update(stream_cycle_start_s=ctrl.meta["teaching"]["cycle_start_s"],
+                                     gait=walking["gait"], cycle_start_s=walking["cycle_start_s"],
+                                     phase="stream")
+        return ctrl
+
+    def take_over(self) -> str:
+        """The last converged taught network walks from now on (``FeedbackGaitSource.switch``: phase
+        matched, ζ/α carried over, cross-faded over ``teach_blend_s``); a sim reset starts over from it.
+        Returns what happened; ValueError with the reason when it cannot."""
+        ctrl = self.taught()
+        if self.last_tick_ns is None or self.source.t_net < self.walk_from_s:
+            raise ValueError("the CPG has not taken over from the start-up yet: try again once it walks or "
+                             "stands on the CPG")
+        phase = self.source.switch(ctrl, self.teach_blend_s)
+        self.ctrl = ctrl
+        self.learned_network = storage.to_dict(ctrl)
+        self.teach_counts["took_over"] += 1
+        return (f"the taught network ({ctrl.gait_frequency_hz():.4f} Hz) took over at sim "
+                f"{self.last_tick_ns / 1e9:.3f} s, {phase:.3f} s into its cycle, cross-fading over "
+                f"{self.teach_blend_s:g} s")
+
+    def save_taught(self, path) -> str:
+        """Write the last converged taught network as a CPG YAML that ``cpg_file`` loads; returns the path."""
+        written = storage.save(self.taught(), path)
+        self.teach_counts["saved"] += 1
+        return str(written)
+
+    def teach_status(self) -> dict[str, str]:
+        """/diagnostics values of the live teaching (per DOF: frequency, amplitude, error)."""
+        teacher = self.teacher
+        if teacher is None:
+            return {"teaching": "off"}
+        p = teacher.progress()
+        v = {"teaching": p["state"], "teaching_reason": p["reason"],
+             "teaching_received": str(self.teach_counts["received"]),
+             "teaching_took_over": str(self.teach_counts["took_over"]),
+             "teaching_converged_result": str(p["converged_result"]).lower()}
+        for key in ("teacher_s", "strides", "teacher_frequency_hz", "correlation"):
+            if key in p:
+                v[f"teaching_{key}"] = f"{p[key]:.6g}"
+        for key in ("learned_frequency_hz", "amplitude_rad", "error_deg"):
+            for name, x in zip(teacher.names, p.get(key, ()), strict=False):
+                v[f"teaching_{key}.{name}"] = f"{x:.6g}"
+        for key, x in teacher.result_info.items():
+            v[f"taught_{key}"] = f"{x:.6g}" if isinstance(x, float) else str(x)
+        if self.teach_work:
+            work = np.asarray(self.teach_work)
+            v["teaching_work_ms_max"] = f"{1e3 * work.max():.3f}"
+        return v
+
     # ---------------------------------------------------------------- status
     def status(self, t_ns: int) -> dict[str, str]:
         """The status values of /diagnostics as of now: modulation, feedback, /cmd_vel."""
@@ -638,6 +749,7 @@ class CPGDriver:
             v.update({"cmd_vel_zeta": f"{o.zeta:.6g}", "cmd_vel_alpha": f"{o.alpha:.6g}",
                       "cmd_vel_turn_rate": f"{o.turn_rate:.6g}",
                       "cmd_vel_side_step_mps": f"{o.linear_y:.6g}"})
+        v.update(self.teach_status())
         return v
 
     def summary(self) -> dict:
@@ -652,4 +764,17 @@ class CPGDriver:
                     "ankle_allowed": self.ankle_allowed, "ankle_fresh": fb.ankle_fresh}
         return {**self.activity.summary(), "overruns": timing["overruns"], "tick": timing,
                 "feedback": feedback, "cmd_vel": self.cmd_vel_counts, "rejoined_at_s": self.rejoined_at_s,
-                "reentries": self.reentries, "clock_resets": self.clock_resets}
+                "reentries": self.reentries, "clock_resets": self.clock_resets,
+                "teaching": self._teach_summary()}
+
+    def _teach_summary(self) -> dict:
+        """The run's live teaching: counts, the last state, and the wall time learning took per call."""
+        teacher = self.teacher
+        if teacher is None:
+            return {"enabled": False}
+        work = np.asarray(self.teach_work) * 1e3
+        stats = None if not len(work) else {
+            "max": round(float(work.max()), 4), "p99": round(float(np.percentile(work, 99)), 4),
+            "mean": round(float(work.mean()), 4)}
+        return {"enabled": True, **self.teach_counts, "state": teacher.state, "reason": teacher.reason,
+                "result": teacher.result_info, "calls": len(work), "work_ms": stats}

@@ -66,6 +66,8 @@ class CPGGaitSource:
                  zeta: float = 1.0, alpha: float = 1.0, governor: GovernorConfig | None = None):
         if transition not in ("recording", "standing"):
             raise ValueError(f"unknown transition {transition!r}; use 'recording' or 'standing'")
+        if ctrl.meta["teaching"].get("phase") == "stream":  # taught live: its phase 0 is not the recording's
+            transition = "standing"
         if not (blend_s >= 0 and math.isfinite(blend_s)):
             raise ValueError(f"blend_s must be >= 0, got {blend_s}")
         self.ctrl = ctrl
@@ -109,6 +111,7 @@ class CPGGaitSource:
         self.governor: Governor | None = None  # made at the takeover, from the commands then
         self._cache = None
         self.feedback_g: np.ndarray | None = None  # eqs 16–17 g_k applied while stepping (feedback.py)
+        self.fading: tuple[HumanoidCPG, float, float] | None = None  # a hand-over's (old network, from, s)
 
     def reenter(self, t: float, zeta: float, alpha: float) -> None:
         """Re-enter the gait at sim time ``t`` > 0 (a cpg node (re)started while the sim runs, or after a
@@ -121,6 +124,7 @@ class CPGGaitSource:
         self.transition = "standing"
         self.handover = float(t)
         self.schedule = []
+        self.fading = None
         self.ctrl.reset_phase(0.0)
         self.ctrl.set_modulation_state(zeta, 0.0)
         first = self._start_alpha(zeta, alpha)
@@ -198,6 +202,24 @@ class CPGGaitSource:
             self.governor = Governor(self.governor_config, self.ctrl.zeta_command, self.ctrl.alpha_command)
         return self.governor
 
+    def switch(self, ctrl: HumanoidCPG, blend_s: float) -> float:
+        """Hand the gait over to another learned network (a live-taught one taking over): its oscillators at
+        the phase whose pattern is nearest the walking one's (``HumanoidCPG.match_phase``), the applied and
+        commanded ζ/α, the per-DOF amplitude factors and the governor carried over, and the CPG DOFs' targets
+        cross-faded from the old network (stepped on meanwhile) to the new over ``blend_s`` sim s (C²
+        smootherstep, as the start-up's cross-fade). Returns the phase chosen (s after its phase 0)."""
+        if not (blend_s >= 0 and math.isfinite(blend_s)):
+            raise ValueError(f"blend_s must be >= 0, got {blend_s}")
+        old = self.ctrl
+        phase_s = ctrl.match_phase(old.unit_pattern())
+        ctrl.dof_scale = old.dof_scale.copy()
+        ctrl.set_modulation_state(old.zeta, old.alpha)
+        ctrl.set_zeta(old.zeta_command)
+        ctrl.set_alpha(old.alpha_command)
+        self.fading = (old, self._t_net, float(blend_s)) if blend_s > 0 else None
+        self.ctrl = ctrl
+        return phase_s
+
     def _advance(self, t: float) -> None:
         while self.schedule and self.schedule[0][0] <= t + 1e-12:
             t_cmd, z, a = self.schedule.pop(0)
@@ -212,6 +234,12 @@ class CPGGaitSource:
                 if a != ctrl.alpha_command:
                     ctrl.set_alpha(a)
             ctrl.step(self.h, self.feedback_g)
+            if self.fading is not None:  # the old network of a hand-over, under the same commands
+                old = self.fading[0]
+                old.set_zeta(ctrl.zeta_command)
+                old.set_alpha(ctrl.alpha_command)
+                old.set_dof_amplitude_scale(ctrl.dof_scale)
+                old.step(self.h, self.feedback_g)
             self._t_net += self.h
 
     def targets(self, t: float) -> tuple[np.ndarray, np.ndarray]:
@@ -219,7 +247,20 @@ class CPGGaitSource:
             return self.playback.targets(t)
         self._advance(t)
         qc, qdc = self.ctrl.joint_targets()
+        if self.fading is not None:
+            qc, qdc = self._fade_from_old(qc, qdc)
         return self._compose(t, qc, qdc)
+
+    def _fade_from_old(self, qc: np.ndarray, qdc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A hand-over's cross-fade (``switch``) of the CPG DOFs at the network's time; ends it when done."""
+        old, since, blend = self.fading
+        u = (self._t_net - since) / blend
+        if u >= 1.0:
+            self.fading = None
+            return qc, qdc
+        qo, qdo = old.joint_targets()
+        w, dw = smootherstep(u)
+        return (1 - w) * qo + w * qc, (1 - w) * qdo + w * qdc + dw / blend * (qc - qo)
 
     def forecast(self, times: np.ndarray, fade: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The targets ``targets(t)`` will give at ``times`` (sim s, non-decreasing), predicted without

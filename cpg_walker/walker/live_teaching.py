@@ -105,6 +105,16 @@ class LiveTeacher:
         self.teachings = 0  # streams that started teaching
         self._reset(IDLE, "")
 
+    def warm_up(self) -> None:
+        """Load the learning's compiled kernels now (on first use they take about a second)."""
+        n = 64
+        t = np.arange(n) * (2.5 / n)
+        q = np.stack([np.sin(2 * math.pi * t / 2.5 + k) for k in range(len(self.names))], axis=1)
+        net, dt, _, _ = HumanoidCPG.learning_network(cycle_from_samples("warm-up", 0.0, q, 2.5 / n),
+                                                     self.settings, self.params)
+        for _ in range(2):
+            net.step(dt, np.stack([q[0], q[0], q[1]]))
+
     # ------------------------------------------------------------------ input
     def _reset(self, state: str, reason: str) -> None:
         self.state, self.reason = state, reason
