@@ -229,11 +229,11 @@ def test_the_driver_learns_from_teach_samples_takes_over_and_saves(tmp_path):
         if t_ns == 20_000_000_000:
             with pytest.raises(ValueError, match="no taught network has converged yet: teaching is learning"):
                 d.take_over()
-            assert d.status(t_ns)["teaching"] == "learning"
+            assert d.teach_status()["teaching"] == "learning"
     info = d.teacher.result_info
     assert info["learned_frequency_hz"] == pytest.approx(stream.frequency_hz, rel=0.01)
     assert any("live teaching converged" in text for _, text in out.logs)
-    status = d.status(t_ns)
+    status = d.teach_status()
     assert status["teaching"] == "converged" and float(status["taught_learned_frequency_hz"]) == \
         pytest.approx(info["learned_frequency_hz"], rel=1e-5)  # as printed (6 digits)
     old_offset = d.ctrl.net.offset.copy()

@@ -18,6 +18,7 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Bool, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from cpg_walker.nodes import cpg_params, specs
@@ -47,7 +48,8 @@ from cpg_walker.walker.cmd_vel import LIMIT_KEYS, CmdVelLimits, check_twist
 from cpg_walker.walker.cpg_driver import CPGDriver, FeedbackFade
 from cpg_walker.walker.feedback import FeedbackController
 from cpg_walker.walker.governor import GovernorConfig, command_error
-from cpg_walker.walker.learning import load_controller
+from cpg_walker.walker.learning import learning_settings, live_teaching_config, load_controller
+from cpg_walker.walker.live_teaching import REFUSED, LiveTeacher
 
 
 def state_layout(names, n_osc: int) -> MultiArrayLayout:
@@ -59,6 +61,18 @@ def state_layout(names, n_osc: int) -> MultiArrayLayout:
         MultiArrayDimension(label="phase_rad|frequency_hz|amplitude_rad;output:q|qd|offset", size=3,
                             stride=3),
     ], data_offset=0)
+
+
+#: /cpg/teach/state's values per joint.
+TEACH_STATE_VALUES = ("learned_frequency_hz", "amplitude_rad", "error_deg")
+
+
+def teach_state_layout(names) -> MultiArrayLayout:
+    """/cpg/teach/state's layout: [dof (names in the label), value (TEACH_STATE_VALUES)]."""
+    m = len(TEACH_STATE_VALUES)
+    return MultiArrayLayout(dim=[
+        MultiArrayDimension(label="dof:" + ",".join(names), size=len(names), stride=len(names) * m),
+        MultiArrayDimension(label="|".join(TEACH_STATE_VALUES), size=m, stride=m)], data_offset=0)
 
 
 #: cpg_node's parameter specs by name.
@@ -106,7 +120,8 @@ class CPGNode(Node):
             monitor_period_ns=round(v["monitor_period"] * 1e9), horizon_s=v["horizon"],
             horizon_step_ns=round(v["horizon_step"] * 1e9), horizon_stop_s=v["horizon_stop"],
             rejoin_settle_ns=round(v["rejoin_settle"] * 1e9),
-            governor=governor)
+            governor=governor, teacher=self._teacher(v["teach"], ctrl.net.N), teach_steps=v["teach_steps"],
+            teach_blend_s=v["teach_blend"])
         self.get_logger().info(f"CPG warmed up in {self.driver.warm_up():.3f} s")
         self.add_on_set_parameters_callback(self._on_set)
         name_refusals(self, lambda name, value: command_error(name, value, governor)
@@ -126,11 +141,27 @@ class CPGNode(Node):
         subs.append(self.create_subscription(Twist, ifc.CMD_VEL, self._on_cmd_vel, ifc.DEPTH))
         subs.append(self.create_subscription(Bool, ifc.SIM_SERVO_HOLD, lambda msg: self.driver.servo_hold(
             msg.data), ifc.latched_qos()))
+        self.teaching = self.driver.teacher is not None
+        if self.teaching:
+            # in the hot path: a teacher at 10 x real time sends 1000 samples per wall s
+            subs.append(self.create_subscription(JointState, ifc.CPG_TEACH, self._on_teach, 1000))
+            self.create_service(Trigger, "~/take_over", self._on_take_over)
+            self.create_service(Trigger, "~/save_taught", self._on_save_taught)
+            self.teach_pub = self.create_publisher(Float64MultiArray, ifc.CPG_TEACH_STATE, ifc.DEPTH)
+            self.teach_msg = Float64MultiArray(layout=teach_state_layout(self.driver.teacher.names))
         self.hot = HotPath(self, subs)
         self._diagnostics(0, "converged", {})
         d = self.driver
         self.get_logger().info(f"CPG N={ctrl.net.N} from {self.origin}; recording's opening steps to "
                                f"{d.source.handover:.3f} s, CPG from {d.walk_from_s:.3f} s")
+
+    @staticmethod
+    def _teacher(on: bool, n_oscillators: int) -> LiveTeacher | None:
+        """The live learner of /cpg/teach (the learning settings', with the walking network's N)."""
+        if not on:
+            return None
+        settings, params = learning_settings(n_oscillators)
+        return LiveTeacher(settings, params, live_teaching_config())
 
     # ---------------------------------------------------------------- the driver's output
     def targets(self, t_ns: int, q: np.ndarray, qd: np.ndarray) -> None:
@@ -146,6 +177,11 @@ class CPGNode(Node):
         self.state_msg.data = darray(state)
         self.state_pub.publish(self.state_msg)
         self._diagnostics(t_ns, self.driver.stage, values)
+        if self.teaching:
+            progress = self.driver.teacher.progress()
+            if "error_deg" in progress:  # learning
+                self.teach_msg.data = darray(np.array([progress[k] for k in TEACH_STATE_VALUES]).T.ravel())
+                self.teach_pub.publish(self.teach_msg)
 
     def log(self, level: str, text: str, key: str | None = None) -> None:
         if key is not None:
@@ -187,6 +223,30 @@ class CPGNode(Node):
             self.throttle.warn(self, "/cmd_vel " + reason_key(exc), f"dropped /cmd_vel: {exc}")
             return
         self.driver.twist(lin.x, ang.z, lin.y)
+
+    def _on_teach(self, msg: JointState) -> None:
+        names, positions = list(msg.name), list(msg.position)
+        if len(names) != len(positions) or not names:
+            self.throttle.warn(self, "/cpg/teach malformed", f"dropped /cpg/teach: {len(names)} names, "
+                               f"{len(positions)} positions")
+            return
+        self.driver.teach(stamp_ns(msg) / 1e9, names, positions)
+
+    def _on_take_over(self, _request, response):
+        try:
+            response.message, response.success = self.driver.take_over(), True
+            self.get_logger().info(response.message)
+        except ValueError as exc:
+            response.message, response.success = f"refused: {exc}", False
+        return response
+
+    def _on_save_taught(self, _request, response):
+        try:
+            path = self.driver.save_taught(self.get_parameter("teach_file").value)
+            response.message, response.success = f"wrote {path}", True
+        except (ValueError, OSError) as exc:
+            response.message, response.success = f"refused: {exc}", False
+        return response
 
     # ---------------------------------------------------------------- parameters
     def _on_set(self, params) -> SetParametersResult:
@@ -252,6 +312,13 @@ class CPGNode(Node):
         status = DiagnosticStatus(level=level, name="cpg_walker/cpg", message=text, hardware_id="cpg",
                                   values=[KeyValue(key=k, value=v) for k, v in {**head, **values}.items()])
         arr = DiagnosticArray(status=[status])
+        if d is not None and d.teacher is not None:
+            tv = d.teach_status()
+            refused = tv["teaching"] == REFUSED
+            arr.status.append(DiagnosticStatus(
+                level=DiagnosticStatus.WARN if refused else DiagnosticStatus.OK, name="cpg_walker/teaching",
+                message=f"refused: {tv['teaching_reason']}" if refused else tv["teaching"], hardware_id="cpg",
+                values=[KeyValue(key=k, value=v) for k, v in tv.items()]))
         arr.header.stamp = stamp(t_ns)
         self.diag_pub.publish(arr)
 

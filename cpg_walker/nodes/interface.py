@@ -35,6 +35,8 @@ TF = "/tf"
 TF_STATIC = "/tf_static"
 CMD_VEL = "/cmd_vel"
 CPG_STATE = "/cpg/state"
+CPG_TEACH = "/cpg/teach"
+CPG_TEACH_STATE = "/cpg/teach/state"
 PARAMETER_EVENTS = "/parameter_events"
 ROSOUT = "/rosout"
 #: foxglove_node's own channels (Foxglove WebSocket, not ROS topics)
@@ -148,6 +150,10 @@ TOPICS = {t.name: t for t in (
     Topic(TF, "tf2_msgs/msg/TFMessage", "odom -> base_link (only where tf2_msgs is installed)"),
     Topic(CMD_VEL, "geometry_msgs/msg/Twist", "velocity command: forward speed and turn rate"),
     Topic(CPG_STATE, "std_msgs/msg/Float64MultiArray", "the oscillators' phases, frequencies, amplitudes"),
+    Topic(CPG_TEACH, "sensor_msgs/msg/JointState",
+          "a gait to learn live: the CPG's ten joints, stamped in the teacher's time"),
+    Topic(CPG_TEACH_STATE, "std_msgs/msg/Float64MultiArray",
+          "the live learning's per-joint frequency, amplitude and error"),
     Topic(PARAMETER_EVENTS, "rcl_interfaces/msg/ParameterEvent", "parameter changes of every node"),
 )}
 
@@ -184,8 +190,10 @@ INTERFACES = {i.executable: i for i in (
                   note="/joint_trajectory is not subscribed in lockstep. Per-joint gains (`kp.<joint>` ...) "
                        "given at start-up are declared beside the group gains, with the same ranges."),
     NodeInterface(CPG_NODE, "the learned CPG: joint targets from the oscillators, on /clock",
-                  subscribes=(CLOCK, IMU, *FOOT_LOADS, CMD_VEL, SIM_SERVO_HOLD),
-                  publishes=(DIAGNOSTICS, CPG_STATE, JOINT_TARGETS, JOINT_TRAJECTORY)),
+                  subscribes=(CLOCK, IMU, *FOOT_LOADS, CMD_VEL, SIM_SERVO_HOLD, CPG_TEACH),
+                  publishes=(DIAGNOSTICS, CPG_STATE, JOINT_TARGETS, JOINT_TRAJECTORY, CPG_TEACH_STATE),
+                  services=("~/take_over", "~/save_taught"),
+                  note="/cpg/teach, /cpg/teach/state and the services only with teach."),
     NodeInterface(ODOM_NODE, "leg odometry from the joints, the IMU and the sole loads (no ground truth)",
                   subscribes=(JOINT_STATES, IMU, *FOOT_LOADS), publishes=(ODOM, TF),
                   note="/tf only with publish_tf, where tf2_msgs imports."),

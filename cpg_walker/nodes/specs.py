@@ -226,6 +226,13 @@ CPG = (
     *CPG_CMD_VEL_LIMITS,
     string("cmd_vel.speed_map", "measured speed vs zeta/alpha for linear.x (a path, or a name in the "
            "package's config/)"),
+    boolean("teach", "learn from /cpg/teach (sensor_msgs/JointState) while walking; ~/take_over, "
+            "~/save_taught (walker/live_teaching.py)", read_only=True),
+    integer("teach_steps", "learning steps (RK4, ~0.08 ms each) after each tick's targets: the teacher's "
+            "rate they keep up with, about 6 per step at 500 Hz", 1, 1000),
+    double("teach_blend", "sim s over which a taught network's targets cross-fade in at ~/take_over", 0.0,
+           10.0),
+    string("teach_file", "where ~/save_taught writes the taught network (a CPG YAML cpg_file loads)"),
     *STATS,
 )
 

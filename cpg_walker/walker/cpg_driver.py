@@ -749,7 +749,6 @@ class CPGDriver:
             v.update({"cmd_vel_zeta": f"{o.zeta:.6g}", "cmd_vel_alpha": f"{o.alpha:.6g}",
                       "cmd_vel_turn_rate": f"{o.turn_rate:.6g}",
                       "cmd_vel_side_step_mps": f"{o.linear_y:.6g}"})
-        v.update(self.teach_status())
         return v
 
     def summary(self) -> dict:
