@@ -124,6 +124,9 @@ NUMBERS = [
     (["cmd-vel-map", "--out", "{out}"], "--window", not_positive),
     (["drive-check", "--out", "{out}"], "--jobs", lambda: ints_below(1)),
     (["drive-check", "--out", "{out}", "--graph"], "--domain-id", lambda: ints_outside(0, 232)),
+    (["teach", "--gait", "walk", "--out", "{out}"], "--rate", not_positive),
+    (["teach", "--gait", "walk", "--out", "{out}"], "--speed", not_positive),
+    (["teach", "--gait", "walk", "--out", "{out}"], "--duration", not_positive),
     (["feedback-search", "--out", "{out}"], "--generations", lambda: ints_below(1)),
     (["feedback-search", "--out", "{out}"], "--popsize", lambda: ints_below(2)),
     (["feedback-search", "--out", "{out}"], "--jobs", lambda: ints_below(1)),
@@ -160,6 +163,7 @@ OUT_COMMANDS = {
     "faults": [], "feedback-search": [], "fit": ["--csv", "{csv}"], "learn": [], "margins": [],
     "plot": ["{bag}"], "record": [], "replay": [], "section2": [], "soak": [], "sweep": [], "transport": [],
     "results": [], "two-hosts": [], "walk": [], "random-walks": [], "pushes": [], "transitions": [],
+    "teach": ["--gait", "walk"],
 }
 OUT_OPTIONS = [(cmd, "--out") for cmd in OUT_COMMANDS] + [("graph", "--log-dir"), ("graph", "--record")]
 
@@ -320,7 +324,8 @@ BAD_DOMAIN = st.one_of(st.integers(max_value=-1), st.integers(min_value=233)).ma
     lambda s: s.strip() != "" and not _parses(s, int))
 DOMAIN_COMMANDS = [["topic", "list"], ["node", "list"], ["node", "info", "/cpg"], ["param", "dump", "/cpg"],
                    ["record", "--out", "{out}"], ["demo", "--out", "{out}"], ["graph"],
-                   ["drive-check", "--out", "{out}", "--graph", "--attach"]]
+                   ["drive-check", "--out", "{out}", "--graph", "--attach"],
+                   ["teach", "--gait", "walk", "--out", "{out}", "--attach"]]
 
 
 @FUZZ
@@ -357,6 +362,12 @@ def test_a_domain_only_python_reads_is_refused(capsys, place, monkeypatch, argv,
     (["graph", "-p", "nonode:x=1"], "-p expects"),
     (["drive-check", "--out", "{out}", "--graph", "-p", "nonode:x=1"], "-p expects"),
     (["drive-check", "--out", "{out}", "--graph", "--plan", "dance"], "argument --plan"),
+    (["teach", "--gait", "run", "--out", "{out}"], "argument --gait"),
+    (["teach", "--out", "{out}"], "one of the arguments --gait --csv --bag is required"),
+    (["teach", "--gait", "walk", "--csv", "{csv}", "--out", "{out}"], "not allowed with argument"),
+    (["teach", "--gait", "walk", "--out", "{out}", "-p", "nonode:x=1"], "-p expects"),
+    (["teach", "--csv", "{file}", "--out", "{out}"], "the first header field must be"),
+    (["teach", "--bag", "{tmp}/nope", "--out", "{out}"], "argument --bag"),
     (["graph", "--foxglove", "host:99999"], "argument --foxglove"),
     (["walk", "--out", "{out}", "--foxglove", "bad host!:80"], "argument --foxglove"),
     (["bench", "--out", "{out}", "--only", "nothing"], "argument --only"),

@@ -212,36 +212,36 @@ def estimate_period(gait: Gait, settle: float | None = None, lo: float = 1.5, hi
 def autocorrelation_period(q: np.ndarray, dt: float, lo: float, hi: float, keep_s: float,
                            refine: bool = False, dip: float | None = None) -> tuple[float | None, float]:
     """(period s, its normalised autocorrelation) of uniform samples ``q`` (n, k), the lag in [lo, hi] s
-    whose overlap is at least ``keep_s`` long that correlates best (None, -inf when there is none).
+    whose overlap is at least ``keep_s`` long that correlates best (None, -inf when there is none): at lag
+    L, Σ q[:-L]·q[L:] / √(Σ q[:-L]² Σ q[L:]²) after removing the mean, every lag at once by FFT.
     ``refine``: the peak placed between samples by a parabola through its neighbours (at most half a
     sample away). ``dip``: only lags past the first one correlating below ``dip`` count (a slowly
-    drifting signal, which correlates well at every short lag, then has no period)."""
-    q = q - q.mean(0)
-
-    def corr(lag: int) -> float:
-        a, b = q[:-lag], q[lag:]
-        return float((a * b).sum() / math.sqrt((a * a).sum() * (b * b).sum() + 1e-300))
-
-    first, last = max(1, int(lo / dt)), min(int(hi / dt), len(q) - int(keep_s / dt))
+    drifting signal, which correlates well at every short lag, then has no period: (None, nan))."""
+    q = np.asarray(q, dtype=float)
+    q = (q - q.mean(0)).reshape(len(q), -1)
+    n = len(q)
+    first, last = max(1, int(lo / dt)), min(int(hi / dt), n - int(keep_s / dt))
+    if last <= first:
+        return None, -np.inf
+    spec = np.fft.rfft(q, n=2 * n, axis=0)
+    cross = np.fft.irfft((spec * spec.conj()).real.sum(axis=1), n=2 * n)[:last + 1]
+    energy = np.concatenate(([0.0], np.cumsum((q * q).sum(axis=1))))  # energy[k] = Σ_{t<k} |q_t|²
+    lags = np.arange(last + 1)
+    corr = cross / np.sqrt(energy[n - lags] * (energy[n] - energy[lags]) + 1e-300)
     if dip is not None:
-        lag = 1
-        while lag < last and corr(lag) >= dip:
-            lag += 1
-        first = max(first, lag)
-    best, best_lag = -np.inf, None
-    for lag in range(first, last):
-        c = corr(lag)
-        if c > best:
-            best, best_lag = c, lag
-    if best_lag is None:
-        return None, best
+        below = np.flatnonzero(corr[1:last] < dip)
+        first = max(first, 1 + int(below[0]) if below.size else last)
+        if first >= last:  # it never decorrelated: a drift, not a period
+            return None, float("nan")
+    best_lag = first + int(np.argmax(corr[first:last]))
+    best = float(corr[best_lag])
     lag = float(best_lag)
-    if refine and best_lag > 1 and best_lag + 1 < len(q):
-        left, right = corr(best_lag - 1), corr(best_lag + 1)
+    if refine and best_lag > 1 and best_lag + 1 <= last:
+        left, right = corr[best_lag - 1], corr[best_lag + 1]
         curve = left - 2 * best + right
         if curve < 0:
             lag += min(0.5, max(-0.5, 0.5 * (left - right) / curve))
-    return lag * dt, best
+    return float(lag * dt), best
 
 
 def find_steady_cycle(gait: Gait, tail: float = 0.8, spread: float = 0.15, window: float = 0.03) -> Cycle:

@@ -700,6 +700,7 @@ class CPGDriver:
         p = teacher.progress()
         v = {"teaching": p["state"], "teaching_reason": p["reason"],
              "teaching_received": str(self.teach_counts["received"]),
+             "teaching_streams": str(p["teachings"]),
              "teaching_took_over": str(self.teach_counts["took_over"]),
              "teaching_converged_result": str(p["converged_result"]).lower()}
         for key in ("teacher_s", "strides", "teacher_frequency_hz", "correlation"):

@@ -102,7 +102,7 @@ class LiveTeacher:
         self.names = tuple(names)
         self.result: HumanoidCPG | None = None
         self.result_info: dict = {}
-        self.teachings = 0  # streams that started teaching
+        self.teachings = 0  # streams begun (a pause of stall_s after a refusal or convergence ends one)
         self._reset(IDLE, "")
 
     def warm_up(self) -> None:
@@ -158,6 +158,8 @@ class LiveTeacher:
                 return
             self._reset(IDLE, "")
             self.last_arrival = now
+        if self.state == IDLE:  # a stream begins with this sample
+            self.teachings += 1
         index = {n: i for i, n in enumerate(names)}
         missing = [n for n in self.names if n not in index]
         if missing:
@@ -181,7 +183,6 @@ class LiveTeacher:
                                    f"{self.cfg.max_gap_s:g} s between samples)")
         if self.state == IDLE:
             self.state, self.first_t = COLLECTING, t
-            self.teachings += 1
         self.last_t = t
         self._t.append(float(t))
         self._q.append(q)
@@ -252,14 +253,16 @@ class LiveTeacher:
             return
         self._next_search = end + SEARCH_EVERY_S
         period, corr = self._estimate_period()
-        self.correlation = None if period is None else round(corr, 4)
+        self.correlation = None if period is None else round(corr, 4)  # nan: a drift
         if period is not None and corr >= cfg.min_correlation:
             self._start_learning(period, end)
         elif end - self.first_t >= cfg.give_up_s:
-            self.refuse(f"the teaching stream is not periodic: over its last {cfg.window_s:g} s no period "
-                        f"in {cfg.min_period_s:g}-{cfg.max_period_s:g} s correlates better than "
-                        f"{corr:.2f} (at least {cfg.min_correlation:g} needed) after "
-                        f"{end - self.first_t:.1f} s")
+            why = (f"it drifts (its autocorrelation never falls below {PERIOD_DIP:g} within "
+                   f"{cfg.max_period_s:g} s)" if np.isnan(corr) else
+                   f"no period in {cfg.min_period_s:g}-{cfg.max_period_s:g} s correlates better than "
+                   f"{corr:.2f} (at least {cfg.min_correlation:g} needed)")
+            self.refuse(f"the teaching stream is not periodic after {end - self.first_t:.1f} s: over its "
+                        f"last {cfg.window_s:g} s {why}")
         else:
             self._prune(end - cfg.window_s - 1.0)
 

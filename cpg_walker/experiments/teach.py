@@ -1,0 +1,225 @@
+"""Teaching the running graph a gait (``cpg-walker teach``): start the graph as ``cpg-walker graph`` does
+(standing: cpg_node at α 0), or join one already running (``--attach``), stream a teacher's joint angles
+on /cpg/teach at ``rate`` teacher s per wall s (stamps in the teacher's time), follow cpg_node's
+``cpg_walker/teaching`` status until the learning converges or is refused, then optionally save the
+taught network (~/save_taught) and take over (~/take_over) and walk it for ``duration`` sim s at α 1,
+watching /odom/ground_truth and /sim/fallen. DIR/teach.json.
+
+Teachers (walker/teaching_stream.py ``TeachingStream``): a packaged gait (walk, slow) or a CSV in the walk
+data format, played from its start and then its steady stride repeated, optionally time-scaled (``speed``:
+the gait at that many times its frequency); or a recording's /cpg/teach-shaped JointState topic in a bag
+(``bag``: played once, in its own time).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cpg_walker.errors import InputError
+from cpg_walker.nodes import interface as ifc
+
+#: Teacher s between the samples streamed (100 Hz of the teacher's time).
+SAMPLE_DT = 0.01
+#: Wall s without a teaching status from cpg_node after which the teaching gives up (no graph there).
+NO_STATUS_S = 60.0
+#: Sim s of a started graph (it is stopped once the teaching and the walk are over).
+GRAPH_DURATION_S = 100_000.0
+
+
+class BagTeacher:
+    """A JointState topic of a rosbag2 bag (rosbags), by its header stamps (teacher time from the first)."""
+
+    def __init__(self, bag: str | Path, topic: str = ifc.JOINT_STATES) -> None:
+        from cpg_walker.nodes.recording import read_topics
+
+        data = read_topics(Path(bag), [topic])
+        msgs = data.get(topic) or []
+        if len(msgs) < 2:
+            raise InputError(f"{bag}: no {topic} messages to teach from (found {len(msgs)})")
+        t0 = None
+        self.samples: list[tuple[float, list[str], list[float]]] = []
+        for _, m in msgs:
+            t = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+            t0 = t if t0 is None else t0
+            self.samples.append((t - t0, list(m.name), [float(x) for x in m.position]))
+        self.frequency_hz = None
+        self.source = str(bag)
+
+    def until(self, t: float):
+        """The samples up to teacher time ``t`` not given yet."""
+        while self.samples and self.samples[0][0] <= t:
+            yield self.samples.pop(0)
+
+
+class StreamTeacher:
+    """A TeachingStream sampled every SAMPLE_DT teacher s."""
+
+    def __init__(self, gait: str, speed: float) -> None:
+        from cpg_walker.walker.teaching_stream import TeachingStream
+
+        self.stream = TeachingStream(gait, speed)
+        self.frequency_hz = self.stream.frequency_hz
+        self.source = self.stream.source
+        self.k = 0
+
+    def until(self, t: float):
+        while self.k * SAMPLE_DT <= t:
+            tk = self.k * SAMPLE_DT
+            self.k += 1
+            yield tk, list(self.stream.names), self.stream.at(tk).tolist()
+
+
+def teach_graph(out: str | Path, teacher, rate: float = 10.0, take_over: bool = False,
+                save: str | Path | None = None, duration: float = 60.0, domain_id: int | None = None,
+                attach: bool = False, pacing: str = "lockstep", params: list[str] | None = None,
+                wall_limit_s: float = 3600.0, progress=print) -> dict:
+    """Teach a graph (started with ``pacing`` and ``cpg-walker graph -p`` ``params``, standing, feedback as
+    configured; or attached to) from ``teacher`` at ``rate``; write and return teach.json's contents."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Odometry
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Bool
+    from std_srvs.srv import Trigger
+
+    from cpg_walker.graph.probe import Probe
+    from cpg_walker.graph.processes import env_domain_id, isolated_env, quiet_domain_id
+    from cpg_walker.graph.runner import resolve_domain
+
+    if not (rate > 0 and np.isfinite(rate)):
+        raise InputError(f"--rate must be a positive number, got {rate}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    if attach and domain_id is None:
+        env = env_domain_id()
+        domain_id = 0 if env is None else env
+    domain = quiet_domain_id() if domain_id is None else resolve_domain(int(domain_id))[0]
+    proc = None
+    if not attach:
+        cmd = [sys.executable, "-m", "cpg_walker.cli.main", "graph", "--pacing", pacing, "--duration",
+               str(GRAPH_DURATION_S), "--domain-id", str(domain), "--log-dir", str(out / "logs"),
+               "-p", "cpg:alpha=0.0", *(a for p in params or () for a in ("-p", p))]
+        proc = subprocess.Popen(cmd, env=isolated_env(domain), stdout=open(out / "graph.log", "w"),
+                                stderr=subprocess.STDOUT, start_new_session=True)
+    probe = Probe(domain, "teacher", diagnostics=True)
+    odom: list[tuple[float, float, float]] = []
+    fallen: list[float] = []
+
+    def on_odom(m: Odometry) -> None:
+        p = m.pose.pose.position
+        odom.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, p.x, p.y))
+
+    def on_fallen(m: Bool) -> None:
+        if m.data and not fallen:
+            fallen.append(odom[-1][0] if odom else float("nan"))
+
+    probe.subscribe(ifc.ODOM_GROUND_TRUTH, Odometry, on_odom, 200)
+    probe.subscribe(ifc.SIM_FALLEN, Bool, on_fallen, ifc.latched_qos())
+    del DiagnosticArray  # the probe watches /diagnostics itself
+    pub = probe.node.create_publisher(JointState, ifc.CPG_TEACH, 1000)
+    res: dict = {"teacher": teacher.source, "teacher_frequency_hz": teacher.frequency_hz, "rate": rate,
+                 "domain_id": domain, "attached": attach, "pacing": None if attach else pacing,
+                 "params": None if attach else list(params or ()), "converged": False,
+                 "converged_after_s": None, "learned_frequency_hz": None, "took_over": False,
+                 "fell": False, "distance_m": None, "saved": None}
+
+    def status() -> dict[str, str]:
+        return probe.statuses.get("cpg_walker/teaching", {})
+
+    where = f"see {out}/graph.log" if proc is not None else "is a graph running there?"
+    try:
+        probe.wait(lambda: bool(status()) and probe.node.count_subscribers(ifc.CPG_TEACH) > 0,
+                   f"cpg_node's teaching on DDS domain {domain} ({where})", NO_STATUS_S)
+        streams = int(status().get("teaching_streams", "0"))  # this teaching is the next stream
+        wall0 = time.monotonic()
+        end = wall0 + wall_limit_s
+        sent, last_report = 0, 0.0
+        while time.monotonic() < end:
+            if proc is not None and proc.poll() is not None:
+                raise InputError(f"the graph stopped while teaching ({where})")
+            now = time.monotonic()
+            msg = JointState()
+            for t, names, positions in teacher.until(rate * (now - wall0)):
+                msg.header.stamp.sec, msg.header.stamp.nanosec = int(t), round((t % 1.0) * 1e9) % 10**9
+                msg.name, msg.position = names, positions
+                pub.publish(msg)
+                sent += 1
+            probe.spin_for(0.005)
+            st = status()
+            ours = int(st.get("teaching_streams", "0")) > streams
+            if ours and st.get("teaching") in ("converged", "refused"):
+                break
+            if now - last_report > 5.0:
+                progress(f"teach: {st.get('teaching', '?')}, teacher {st.get('teaching_teacher_s', '0')} s, "
+                         f"{float(st.get('teaching_strides', 0)):.0f} strides ({sent} samples sent)")
+                last_report = now
+        st = status()
+        res.update(samples_sent=sent, teaching_wall_s=round(time.monotonic() - wall0, 2),
+                   state=st.get("teaching"), reason=st.get("teaching_reason", ""))
+        if st.get("teaching") != "converged":
+            res["reason"] = res["reason"] or f"not converged within {wall_limit_s:g} wall s"
+            return _write(out, res)
+        res.update(converged=True, converged_after_s=float(st["taught_converged_after_s"]),
+                   learned_frequency_hz=float(st["taught_learned_frequency_hz"]),
+                   stream_frequency_hz=float(st["taught_teacher_frequency_hz"]),
+                   strides=int(float(st["taught_strides"])))
+        progress(f"teach: converged after {res['converged_after_s']:.1f} teacher s, "
+                 f"{res['learned_frequency_hz']:.4f} Hz learned")
+        if save is not None:
+            path = str(Path(save).resolve())
+            value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=path)
+            result = probe.set_param("cpg", "teach_file", value)
+            if not result.successful:
+                raise InputError(f"cpg_node refused teach_file {path}: {result.reason}")
+            answer = probe.call(Trigger, "/cpg/save_taught")
+            if not answer.success:
+                raise InputError(f"cpg_node could not save the taught network: {answer.message}")
+            res["saved"] = path
+        if take_over:
+            answer = probe.call(Trigger, "/cpg/take_over")
+            res["take_over_message"] = answer.message
+            if not answer.success:
+                raise InputError(f"cpg_node refused the take-over: {answer.message}")
+            res["took_over"] = True
+            result = probe.set_param("cpg", "alpha", 1.0)
+            if not result.successful:
+                raise InputError(f"cpg_node refused alpha 1: {result.reason}")
+            probe.wait(lambda: bool(odom), "/odom/ground_truth", NO_STATUS_S)
+            t_start = odom[-1][0]
+            res["walk_from_s"] = round(t_start, 3)
+            next_report = time.monotonic() + 5.0
+            while odom[-1][0] < t_start + duration and not fallen and time.monotonic() < end:
+                if proc is not None and proc.poll() is not None:
+                    raise InputError(f"the graph stopped during the walk ({where})")
+                probe.spin_for(0.05)
+                if time.monotonic() > next_report:
+                    progress(f"teach: walking the taught gait, sim {odom[-1][0] - t_start:.0f} / "
+                             f"{duration:g} s")
+                    next_report = time.monotonic() + 5.0
+            track = np.array([o for o in odom if o[0] >= t_start])
+            res.update(fell=bool(fallen), fell_at_s=round(fallen[0], 2) if fallen else None,
+                       walked_s=round(float(track[-1, 0] - t_start), 3),
+                       distance_m=round(float(np.linalg.norm(track[-1, 1:] - track[0, 1:])), 4))
+        return _write(out, res)
+    finally:
+        probe.close()
+        if proc is not None and proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGINT)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+
+
+def _write(out: Path, res: dict) -> dict:
+    (out / "teach.json").write_text(json.dumps(res, indent=2) + "\n")
+    return res
