@@ -40,7 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--domain-id", type=domain_id, default=None, metavar="N", help="the DDS domain")
     p.add_argument("-p", dest="params", action="append", default=[], metavar="NODE:NAME=VALUE",
                    help="a start-up parameter of the started graph, as `cpg-walker graph -p`; repeatable "
-                        "(default: cpg:feedback=false, the walk's feedback gains fall the slow gait)")
+                        "(default: cpg:feedback=false, the walk's feedback gains fall the slow gait; "
+                        "cpg:alpha=0.0 stands while learning)")
     p.set_defaults(func=_teach)
 
 
@@ -63,7 +64,15 @@ def _teach(args: argparse.Namespace) -> int:
                       duration=args.duration, domain_id=args.domain_id, attach=args.attach,
                       pacing=args.pacing, params=params,
                       progress=lambda s: print(s, file=sys.stderr, flush=True))
+    if res["fell"] and not res["took_over"]:
+        return report_fall("teach", [fall_line("teach", res["fell_at_s"], what="while being taught")])
     if not res["converged"]:
+        if "after" in res:
+            a = res["after"]
+            print(f"the walk went on untouched: {a['distance_m']:.2f} m in {a['walked_s']:.1f} sim s after "
+                  "the refusal")
+        if res["fell"]:
+            return report_fall("teach", [fall_line("teach", res.get("fell_at_s"), what="after the refusal")])
         print(f"cpg-walker teach: not taught: {res.get('reason')}", file=sys.stderr)
         return BAD_INPUT
     line = (f"taught: {res['learned_frequency_hz']:.4f} Hz learned after {res['converged_after_s']:.1f} "

@@ -1,5 +1,6 @@
 """Teaching the running graph a gait (``cpg-walker teach``): start the graph as ``cpg-walker graph`` does
-(standing: cpg_node at α 0), or join one already running (``--attach``), stream a teacher's joint angles
+(walking its network, or standing with ``-p cpg:alpha=0.0``), or join one already running (``--attach``),
+stream a teacher's joint angles
 on /cpg/teach at ``rate`` teacher s per wall s (stamps in the teacher's time), follow cpg_node's
 ``cpg_walker/teaching`` status until the learning converges or is refused, then optionally save the
 taught network (~/save_taught) and take over (~/take_over) and walk it for ``duration`` sim s at α 1,
@@ -30,6 +31,8 @@ from cpg_walker.nodes import interface as ifc
 SAMPLE_DT = 0.01
 #: Wall s without a teaching status from cpg_node after which the teaching gives up (no graph there).
 NO_STATUS_S = 60.0
+#: Sim s the walk is watched after a refused teaching (it goes on with its network untouched).
+AFTER_REFUSAL_S = 10.0
 #: Sim s of a started graph (it is stopped once the teaching and the walk are over).
 GRAPH_DURATION_S = 100_000.0
 
@@ -81,8 +84,9 @@ def teach_graph(out: str | Path, teacher, rate: float = 10.0, take_over: bool = 
                 save: str | Path | None = None, duration: float = 60.0, domain_id: int | None = None,
                 attach: bool = False, pacing: str = "lockstep", params: list[str] | None = None,
                 wall_limit_s: float = 3600.0, progress=print) -> dict:
-    """Teach a graph (started with ``pacing`` and ``cpg-walker graph -p`` ``params``, standing, feedback as
-    configured; or attached to) from ``teacher`` at ``rate``; write and return teach.json's contents."""
+    """Teach a graph (started with ``pacing`` and ``cpg-walker graph -p`` ``params``; or attached to) from
+    ``teacher`` at ``rate``; write and return teach.json's contents (``fell``: during the teaching or the
+    taught walk)."""
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry
     from rcl_interfaces.msg import ParameterType, ParameterValue
@@ -106,7 +110,7 @@ def teach_graph(out: str | Path, teacher, rate: float = 10.0, take_over: bool = 
     if not attach:
         cmd = [sys.executable, "-m", "cpg_walker.cli.main", "graph", "--pacing", pacing, "--duration",
                str(GRAPH_DURATION_S), "--domain-id", str(domain), "--log-dir", str(out / "logs"),
-               "-p", "cpg:alpha=0.0", *(a for p in params or () for a in ("-p", p))]
+               *(a for p in params or () for a in ("-p", p))]
         proc = subprocess.Popen(cmd, env=isolated_env(domain), stdout=open(out / "graph.log", "w"),
                                 stderr=subprocess.STDOUT, start_new_session=True)
     probe = Probe(domain, "teacher", diagnostics=True)
@@ -140,6 +144,7 @@ def teach_graph(out: str | Path, teacher, rate: float = 10.0, take_over: bool = 
                    f"cpg_node's teaching on DDS domain {domain} ({where})", NO_STATUS_S)
         streams = int(status().get("teaching_streams", "0"))  # this teaching is the next stream
         wall0 = time.monotonic()
+        t_taught = odom[-1][0] if odom else 0.0
         end = wall0 + wall_limit_s
         sent, last_report = 0, 0.0
         while time.monotonic() < end:
@@ -163,9 +168,20 @@ def teach_graph(out: str | Path, teacher, rate: float = 10.0, take_over: bool = 
                 last_report = now
         st = status()
         res.update(samples_sent=sent, teaching_wall_s=round(time.monotonic() - wall0, 2),
-                   state=st.get("teaching"), reason=st.get("teaching_reason", ""))
+                   state=st.get("teaching"), reason=st.get("teaching_reason", ""),
+                   during_teaching=_walked(odom, t_taught))
+        if fallen:  # while being taught: the walking network untouched, but on the ground
+            res.update(fell=True, fell_at_s=round(fallen[0], 2))
         if st.get("teaching") != "converged":
             res["reason"] = res["reason"] or f"not converged within {wall_limit_s:g} wall s"
+            if odom and not fallen:  # the walk goes on, its network untouched: watch it a while
+                t_end = odom[-1][0]
+                probe.wait(lambda: odom[-1][0] >= t_end + AFTER_REFUSAL_S or bool(fallen),
+                           f"{AFTER_REFUSAL_S:g} sim s of walking after the refusal", 10 * NO_STATUS_S)
+                cpg = probe.status("cpg_walker/cpg")
+                res["after"] = {**_walked(odom, t_end), "fell": bool(fallen), "cpg_state": cpg.get("state"),
+                                "took_over": status().get("teaching_took_over")}
+                res.update(fell=bool(fallen), fell_at_s=round(fallen[0], 2) if fallen else None)
             return _write(out, res)
         res.update(converged=True, converged_after_s=float(st["taught_converged_after_s"]),
                    learned_frequency_hz=float(st["taught_learned_frequency_hz"]),
@@ -183,7 +199,7 @@ def teach_graph(out: str | Path, teacher, rate: float = 10.0, take_over: bool = 
             if not answer.success:
                 raise InputError(f"cpg_node could not save the taught network: {answer.message}")
             res["saved"] = path
-        if take_over:
+        if take_over and not fallen:
             answer = probe.call(Trigger, "/cpg/take_over")
             res["take_over_message"] = answer.message
             if not answer.success:
@@ -218,6 +234,16 @@ def teach_graph(out: str | Path, teacher, rate: float = 10.0, take_over: bool = 
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait()
+
+
+def _walked(odom: list[tuple[float, float, float]], since: float) -> dict:
+    """From sim s ``since`` to the newest odometry: the time and the straight-line distance walked."""
+    track = [o for o in odom if o[0] >= since]
+    if len(track) < 2:
+        return {"from_s": since, "walked_s": 0.0, "distance_m": 0.0}
+    (t0, x0, y0), (t1, x1, y1) = track[0], track[-1]
+    return {"from_s": round(t0, 3), "walked_s": round(t1 - t0, 3),
+            "distance_m": round(float(np.hypot(x1 - x0, y1 - y0)), 4)}
 
 
 def _write(out: Path, res: dict) -> dict:

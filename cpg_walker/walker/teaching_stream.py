@@ -2,7 +2,8 @@
 
 ``TeachingStream`` plays a recording (a packaged gait name, e.g. ``walk`` or ``slow``, or a CSV in the
 walk data format) from its start and then its steady stride (``gait_data.find_steady_cycle``) over and
-over, so a short recording teaches for as long as the learning needs; ``speed`` time-scales it (the gait
+over, so a short recording teaches for as long as the learning needs (a recording without a stride in
+it: all of it over and over, for the learner to judge); ``speed`` time-scales it (the gait
 at ``speed`` times its frequency: a stream the recorded gaits never were). Teacher time starts at 0.
 """
 
@@ -29,8 +30,13 @@ class TeachingStream:
             raise InputError(f"{rec.source}: the recording lacks the CPG's joint(s) {', '.join(missing)}")
         cols = [rec.names.index(j) for j in DOFS]
         self.gait = rec.__class__(rec.name, DOFS, rec.t, rec.q[:, cols], rec.source)
-        cyc = find_steady_cycle(rec)
-        self.cycle_start, self.cycle_period = float(cyc.start), float(cyc.period)
+        try:
+            cyc = find_steady_cycle(rec)
+            self.cycle_start, self.cycle_period = float(cyc.start), float(cyc.period)
+            self.periodic = True
+        except InputError:  # no gait in it: the whole recording over and over (cpg_node will judge it)
+            self.cycle_start, self.cycle_period = 0.0, float(rec.duration)
+            self.periodic = False
         self.speed = float(speed)
         self.names = DOFS
         self.source = rec.source
