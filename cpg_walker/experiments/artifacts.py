@@ -45,6 +45,10 @@ ARTIFACTS: tuple[Artifact, ...] = (
     Artifact("steer_graph", "turn in place, side step, forward through the realtime graph by a Twist client",
              ("drive-check", "--graph", "--plan", "steer", "--pacing", "realtime"),
              ("drive_graph.json", "drive_graph.md"), 2.0),
+    Artifact("teach_slow", "the slow walk taught live through the realtime graph, taking over, 60 s walked",
+             ("teach", "--gait", "slow", "--take-over", "--pacing", "realtime"), ("teach.json", "teach.md"), 2.0),
+    Artifact("teach_unseen", "the walk at 1.25 x its frequency taught live through the graph",
+             ("teach", "--gait", "walk", "--speed", "1.25"), ("teach.json", "teach.md"), 1.0),
     Artifact("random_walks", "100 random command sequences of 120 s through the governor, in-process",
              ("random-walks", "--seeds", "400-499"), ("random_walks.json",), 14.0),
     Artifact("random_walks_default", "50 more random command sequences of 120 s with cpg_node's default "

@@ -69,8 +69,8 @@ class StreamTeacher:
         from cpg_walker.walker.teaching_stream import TeachingStream
 
         self.stream = TeachingStream(gait, speed)
-        self.frequency_hz = self.stream.frequency_hz
-        self.source = self.stream.source
+        self.frequency_hz = self.stream.frequency_hz if self.stream.periodic else None
+        self.source = str(gait) + (f" at {speed:g} x its frequency" if speed != 1.0 else "")
         self.k = 0
 
     def until(self, t: float):
@@ -84,6 +84,38 @@ def teach_graph(out: str | Path, teacher, rate: float = 10.0, take_over: bool = 
                 save: str | Path | None = None, duration: float = 60.0, domain_id: int | None = None,
                 attach: bool = False, pacing: str = "lockstep", params: list[str] | None = None,
                 wall_limit_s: float = 3600.0, progress=print) -> dict:
+    """``_teach`` and, for a graph it started, the nodes' own timing once they stopped (``node_timing``)."""
+    res = _teach(Path(out), teacher, rate, take_over, save, duration, domain_id, attach, pacing, params,
+                 wall_limit_s, progress)
+    if not attach:
+        res["node_timing"] = node_timing(Path(out) / "logs")
+        _write(Path(out), res)
+    return res
+
+
+def node_timing(logs: Path) -> dict:
+    """Did learning delay the control ticks? cpg_node's tick work and period (its learning runs after a
+    tick's targets, timed apart) and its learning's wall time per call; the sim's round trip (state out
+    to torque back) and its torques that came late. From the nodes' exit statistics."""
+    out: dict = {}
+    cpg, sim = logs / "cpg_node.stats.json", logs / "sim_node.stats.json"
+    if cpg.exists():
+        d = json.loads(cpg.read_text())
+        tick = d.get("tick", {})
+        out["cpg_node"] = {"ticks": tick.get("ticks"), "overruns": tick.get("overruns"),
+                           "tick_work_ms": tick.get("work_ms"), "tick_period_ms": tick.get("period_ms"),
+                           "learning_ms_per_call": d.get("teaching", {}).get("work_ms"),
+                           "learning_calls": d.get("teaching", {}).get("calls")}
+    if sim.exists():
+        d = json.loads(sim.read_text())
+        out["sim_node"] = {k: d.get(k) for k in ("sim_s", "real_time_factor", "latency", "late_commands",
+                                                  "late_held", "torque_age_s")}
+    return out
+
+
+def _teach(out: Path, teacher, rate: float, take_over: bool, save: str | Path | None, duration: float,
+           domain_id: int | None, attach: bool, pacing: str, params: list[str] | None, wall_limit_s: float,
+           progress) -> dict:
     """Teach a graph (started with ``pacing`` and ``cpg-walker graph -p`` ``params``; or attached to) from
     ``teacher`` at ``rate``; write and return teach.json's contents (``fell``: during the teaching or the
     taught walk)."""
@@ -246,6 +278,47 @@ def _walked(odom: list[tuple[float, float, float]], since: float) -> dict:
             "distance_m": round(float(np.hypot(x1 - x0, y1 - y0)), 4)}
 
 
+def markdown(res: dict) -> str:
+    """teach.md: what was taught, learned, and walked."""
+    rows = [("teacher", f"{res['teacher']} at {res['rate']:g} teacher s per wall s"),
+            ("teacher's frequency", _hz(res.get("teacher_frequency_hz") or res.get("stream_frequency_hz")))]
+    if res["converged"]:
+        rows += [("learned frequency", _hz(res["learned_frequency_hz"])),
+                 ("converged after", f"{res['converged_after_s']:.1f} teacher s ({res['strides']} strides, "
+                                     f"{res['teaching_wall_s']:.1f} wall s)")]
+    else:
+        rows.append(("refused", res.get("reason") or ""))
+    walk = res.get("during_teaching")
+    if walk:
+        rows.append(("the walk while taught", f"{walk['distance_m']:.2f} m in {walk['walked_s']:.1f} sim s"))
+    if res.get("after"):
+        a = res["after"]
+        rows.append(("the walk after the refusal", f"{a['distance_m']:.2f} m in {a['walked_s']:.1f} sim s, "
+                                                   f"cpg_node {a['cpg_state']}, took over {a['took_over']}"))
+    if res["took_over"]:
+        rows.append(("the taught gait, after taking over",
+                     f"{res['distance_m']:.2f} m in {res['walked_s']:.1f} sim s"))
+    rows.append(("fell", "yes, at sim " + f"{res['fell_at_s']} s" if res["fell"] else "no"))
+    timing = res.get("node_timing", {})
+    if timing.get("cpg_node", {}).get("learning_ms_per_call"):
+        c, s = timing["cpg_node"], timing.get("sim_node", {})
+        learn, work = c["learning_ms_per_call"], c["tick_work_ms"]
+        rows.append(("learning per call (after a tick's targets)",
+                     f"mean {learn['mean']:.3f} ms, p99 {learn['p99']:.3f}, max {learn['max']:.3f}"))
+        rows.append(("cpg_node's tick work", f"p99 {work['p99']:.3f} ms, max {work['max']:.3f} "
+                                             f"({c['overruns']} of {c['ticks']} over the period)"))
+        if s.get("latency"):
+            rows.append(("the sim's state-to-torque round trip",
+                         f"p99 {s['latency']['p99_ms']:.3f} ms, max {s['latency']['max_ms']:.3f}; late "
+                         f"torques held: {s['late_held']}"))
+    return "| | |\n|---|---|\n" + "".join(f"| {k} | {v} |\n" for k, v in rows)
+
+
+def _hz(x: float | None) -> str:
+    return "unknown" if x is None else f"{x:.4f} Hz"
+
+
 def _write(out: Path, res: dict) -> dict:
     (out / "teach.json").write_text(json.dumps(res, indent=2) + "\n")
+    (out / "teach.md").write_text(markdown(res))
     return res
