@@ -164,7 +164,8 @@ class Client:
 CHANNELS = {ifc.TF: "foxglove.FrameTransforms", ifc.JOINT_STATES: "foxglove.JointStates",
             ifc.JOINT_TARGETS: "foxglove.JointStates", ifc.CPG_STATE: "cpg_walker.CpgState",
             ifc.CONTACT: "cpg_walker.Contact", ifc.CONTACT_TOUCHDOWN: "cpg_walker.Touchdown",
-            ifc.DIAGNOSTICS: "cpg_walker.Diagnostics", ifc.ROBOT_DESCRIPTION: "std_msgs/msg/String"}
+            ifc.DIAGNOSTICS: "cpg_walker.Diagnostics", ifc.ROBOT_DESCRIPTION: "std_msgs/msg/String",
+            ifc.CPG_TEACH_STATE: "cpg_walker.TeachState"}
 
 
 @pytest.mark.ros
@@ -336,6 +337,19 @@ def test_the_shipped_layout_is_the_generated_one() -> None:
     assert shipped.read_text() == layout_json(), "regenerate: python -m cpg_walker.graph.foxglove_layout"
     paths = re.findall(r'"value": "(/[^."\[]+(?:/[^."\[]+)*)', shipped.read_text())
     assert paths and set(paths) <= set(CHANNELS), set(paths) - set(CHANNELS)
+
+
+def test_teach_state_is_keyed_by_joint_and_a_foreign_layout_refused() -> None:
+    """/cpg/teach/state as cpg_node lays it out (nodes/cpg_node.py teach_state_layout), by DOF name."""
+    from cpg_walker.nodes.cpg_node import TEACH_STATE_VALUES, teach_state_layout
+    from cpg_walker.nodes.foxglove_view import teach_state
+
+    data = [float(10 * b + k) for b in range(len(DOFS)) for k in range(len(TEACH_STATE_VALUES))]
+    view = teach_state(teach_state_layout(DOFS).dim, data, 3_000_000_001)
+    assert view["timestamp"] == {"sec": 3, "nsec": 1} and list(view["dofs"]) == list(DOFS)
+    assert view["dofs"][DOFS[2]] == {"learned_frequency_hz": 20.0, "amplitude_rad": 21.0, "error_deg": 22.0}
+    with pytest.raises(ValueError, match="layout"):
+        teach_state(teach_state_layout(DOFS).dim, data[:-1], 0)
 
 
 def test_sole_load_read_straight_from_the_cdr_equals_rclpy_deserialization() -> None:

@@ -583,3 +583,25 @@ def test_a_missing_bag_is_one_clear_error(tmp_path):
 
     assert main(["plot", str(tmp_path / "nope"), "--out", str(tmp_path)]) == 2
     assert main(["plot", str(tmp_path), "--out", str(tmp_path / "p")]) == 2
+
+
+def test_a_recorded_joint_state_topic_is_a_teaching_recording(walk):
+    """`cpg-walker teach --bag DIR`: the walk's /joint_states as a recording (experiments/teach.py
+    bag_gait), uniform at the control period, every joint, streamed by TeachingStream (no stride in 2 s:
+    all of it over and over, for cpg_node to judge)."""
+    from cpg_walker.experiments.teach import StreamTeacher, bag_gait
+    from cpg_walker.robot.joints import JOINT_NAMES
+
+    gait = bag_gait(walk.out)
+    assert set(gait.names) == set(JOINT_NAMES) and gait.dt == pytest.approx(SIM["control_period"], rel=1e-6)
+    assert gait.duration == pytest.approx(DURATION_S - SIM["control_period"], abs=1e-6)
+    states = [m for _, m in walk.data[ifc.JOINT_STATES]]
+    k = 100  # the 100th state, at its stamp
+    t = (states[k].header.stamp.sec + states[k].header.stamp.nanosec * 1e-9) - \
+        (states[0].header.stamp.sec + states[0].header.stamp.nanosec * 1e-9)
+    np.testing.assert_allclose(gait.at(t), np.asarray(states[k].position), atol=1e-12)
+    teacher = StreamTeacher(gait, 1.0)
+    assert not teacher.stream.periodic and teacher.frequency_hz is None
+    samples = list(teacher.until(3.0))  # past the end: it starts over
+    assert len(samples) == 301 and samples[0][1] == list(teacher.stream.names)
+    np.testing.assert_allclose(samples[300][2], teacher.stream.at(3.0))

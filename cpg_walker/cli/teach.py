@@ -18,11 +18,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                              "repeated after its opening)")
     src.add_argument("--csv", type=in_file, metavar="FILE", help="a recording in the walk data format")
     src.add_argument("--bag", type=in_path, metavar="DIR", help="a rosbag2 recording's JointState topic "
-                                                                "(--bag-topic), played once")
+                                                                "(--bag-topic), as a recording")
     p.add_argument("--bag-topic", default="/joint_states", metavar="TOPIC",
                    help="with --bag: the sensor_msgs/JointState topic (default /joint_states)")
     p.add_argument("--speed", type=positive, default=1.0, metavar="S",
-                   help="with --gait/--csv: the gait at S times its frequency (default 1)")
+                   help="the gait at S times its frequency (default 1)")
     p.add_argument("--rate", type=positive, default=10.0, metavar="R",
                    help="teacher s streamed per wall s (default 10; the stamps stay in the teacher's time, "
                         "so the learned frequency does not depend on it)")
@@ -52,14 +52,12 @@ DEFAULT_PARAMS = ("cpg:feedback=false",)
 
 def _teach(args: argparse.Namespace) -> int:
     from cpg_walker.cli.graph import parse_param
-    from cpg_walker.experiments.teach import BagTeacher, StreamTeacher, teach_graph
+    from cpg_walker.experiments.teach import StreamTeacher, bag_gait, teach_graph
 
     given = {parse_param(text)[:2] for text in args.params}  # InputError naming a bad one, first
     params = [p for p in DEFAULT_PARAMS if parse_param(p)[:2] not in given] + list(args.params)
-    if args.bag is not None:
-        teacher = BagTeacher(args.bag, args.bag_topic)
-    else:
-        teacher = StreamTeacher(args.gait or args.csv, args.speed)
+    source = bag_gait(args.bag, args.bag_topic) if args.bag is not None else args.gait or args.csv
+    teacher = StreamTeacher(source, args.speed)
     res = teach_graph(args.out, teacher, rate=args.rate, take_over=args.take_over, save=args.save,
                       duration=args.duration, domain_id=args.domain_id, attach=args.attach,
                       pacing=args.pacing, params=params,

@@ -6,10 +6,9 @@ on /cpg/teach at ``rate`` teacher s per wall s (stamps in the teacher's time), f
 taught network (~/save_taught) and take over (~/take_over) and walk it for ``duration`` sim s at α 1,
 watching /odom/ground_truth and /sim/fallen. DIR/teach.json.
 
-Teachers (walker/teaching_stream.py ``TeachingStream``): a packaged gait (walk, slow) or a CSV in the walk
-data format, played from its start and then its steady stride repeated, optionally time-scaled (``speed``:
-the gait at that many times its frequency); or a recording's /cpg/teach-shaped JointState topic in a bag
-(``bag``: played once, in its own time).
+Teachers (walker/teaching_stream.py ``TeachingStream``): a packaged gait (walk, slow), a CSV in the walk
+data format or a bag's JointState topic (``bag_gait``), played from its start and then its steady stride
+repeated, optionally time-scaled (``speed``: the gait at that many times its frequency).
 """
 
 from __future__ import annotations
@@ -26,6 +25,7 @@ import numpy as np
 
 from cpg_walker.errors import InputError
 from cpg_walker.nodes import interface as ifc
+from cpg_walker.robot.gait_data import Gait
 
 #: Teacher s between the samples streamed (100 Hz of the teacher's time).
 SAMPLE_DT = 0.01
@@ -37,40 +37,44 @@ AFTER_REFUSAL_S = 10.0
 GRAPH_DURATION_S = 100_000.0
 
 
-class BagTeacher:
-    """A JointState topic of a rosbag2 bag (rosbags), by its header stamps (teacher time from the first)."""
+def bag_gait(bag: str | Path, topic: str = ifc.JOINT_STATES) -> Gait:
+    """A rosbag2 recording's sensor_msgs/JointState ``topic`` as a Gait: the first message's joints, by
+    their header stamps (from the first), resampled to their median step."""
+    from cpg_walker.nodes.recording import read_topics
 
-    def __init__(self, bag: str | Path, topic: str = ifc.JOINT_STATES) -> None:
-        from cpg_walker.nodes.recording import read_topics
-
-        data = read_topics(Path(bag), [topic])
-        msgs = data.get(topic) or []
-        if len(msgs) < 2:
-            raise InputError(f"{bag}: no {topic} messages to teach from (found {len(msgs)})")
-        t0 = None
-        self.samples: list[tuple[float, list[str], list[float]]] = []
-        for _, m in msgs:
-            t = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
-            t0 = t if t0 is None else t0
-            self.samples.append((t - t0, list(m.name), [float(x) for x in m.position]))
-        self.frequency_hz = None
-        self.source = str(bag)
-
-    def until(self, t: float):
-        """The samples up to teacher time ``t`` not given yet."""
-        while self.samples and self.samples[0][0] <= t:
-            yield self.samples.pop(0)
+    msgs = read_topics(Path(bag), [topic]).get(topic) or []
+    if len(msgs) < 4:
+        raise InputError(f"{bag}: {len(msgs)} {topic} messages, too few to teach from")
+    names = tuple(msgs[0][1].name)
+    t, q = [], []
+    for _, m in msgs:
+        if tuple(m.name) != names or len(m.position) != len(names):
+            raise InputError(f"{bag}: {topic}'s joints change between messages")
+        stamp = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+        if t and stamp <= t[-1]:
+            continue  # a re-sent (lockstep) or out-of-order state: the first of a stamp counts
+        t.append(stamp)
+        q.append(np.asarray(m.position, dtype=float))
+    if len(t) < 4:
+        raise InputError(f"{bag}: {len(t)} {topic} stamps, too few to teach from")
+    t = np.asarray(t) - t[0]
+    dt = float(np.median(np.diff(t)))
+    tu = np.arange(0.0, t[-1] + 1e-9, dt)
+    q = np.asarray(q)
+    qu = np.stack([np.interp(tu, t, q[:, j]) for j in range(q.shape[1])], axis=1)
+    return Gait(Path(bag).name, names, tu, qu, f"{bag} {topic}")
 
 
 class StreamTeacher:
     """A TeachingStream sampled every SAMPLE_DT teacher s."""
 
-    def __init__(self, gait: str, speed: float) -> None:
+    def __init__(self, gait: str | Gait, speed: float) -> None:
         from cpg_walker.walker.teaching_stream import TeachingStream
 
         self.stream = TeachingStream(gait, speed)
         self.frequency_hz = self.stream.frequency_hz if self.stream.periodic else None
-        self.source = str(gait) + (f" at {speed:g} x its frequency" if speed != 1.0 else "")
+        self.source = (gait.source if isinstance(gait, Gait) else str(gait)) + (
+            f" at {speed:g} x its frequency" if speed != 1.0 else "")
         self.k = 0
 
     def until(self, t: float):

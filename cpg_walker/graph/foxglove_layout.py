@@ -57,6 +57,8 @@ def layout() -> fl.Layout:
                for s in SIDES]))
     params = fl.ParametersPanel(title="zeta (speed), alpha (step length)")
     diagnostics = fl.DiagnosticsSummaryPanel(title="diagnostics")
+    teaching = _plot("live teaching: learned frequency (first oscillator per DOF)",
+                     [_series(f"/cpg/teach/state.dofs.{d}.learned_frequency_hz", d) for d in PLOTTED], "Hz")
 
     def column(*panels, weights=None) -> fl.SplitContainer:
         weights = weights or [1] * len(panels)
@@ -66,7 +68,7 @@ def layout() -> fl.Layout:
     return fl.Layout(content=fl.SplitContainer(direction="row", items=[
         fl.SplitItem(proportion=1.2, content=column(three_d, params, weights=[3, 1])),
         fl.SplitItem(proportion=1.0, content=column(phases, amplitudes, joints)),
-        fl.SplitItem(proportion=0.8, content=column(loads, contact, diagnostics)),
+        fl.SplitItem(proportion=0.8, content=column(loads, contact, teaching, diagnostics)),
     ]))
 
 

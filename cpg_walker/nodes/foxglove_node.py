@@ -50,6 +50,7 @@ from cpg_walker.nodes.foxglove_view import (
     DIAGNOSTICS_SCHEMA,
     READY,
     STRING_SCHEMA,
+    TEACH_STATE_SCHEMA,
     TOUCHDOWN_SCHEMA,
     Contacts,
     Poser,
@@ -58,6 +59,7 @@ from cpg_walker.nodes.foxglove_view import (
     diagnostics,
     is_loopback,
     stamp_dict,
+    teach_state,
     wrench_load,
 )
 from cpg_walker.nodes.messages import stamp_ns
@@ -108,6 +110,7 @@ class FoxgloveNode(Node):
         self.ch_contact = foxglove.Channel(ifc.CONTACT, schema=CONTACT_SCHEMA, context=self.ctx)
         self.ch_touchdown = foxglove.Channel(ifc.CONTACT_TOUCHDOWN, schema=TOUCHDOWN_SCHEMA, context=self.ctx)
         self.ch_diag = foxglove.Channel(ifc.DIAGNOSTICS, schema=DIAGNOSTICS_SCHEMA, context=self.ctx)
+        self.ch_teach = foxglove.Channel(ifc.CPG_TEACH_STATE, schema=TEACH_STATE_SCHEMA, context=self.ctx)
         self.ch_desc = foxglove.Channel(ifc.ROBOT_DESCRIPTION, schema=STRING_SCHEMA, context=self.ctx)
         self.send_description = False
 
@@ -145,6 +148,7 @@ class FoxgloveNode(Node):
             for s in ifc.FOOT_LOAD_SIDES])
         self.create_subscription(Float64MultiArray, ifc.CPG_STATE, self._cpg_state, 10)
         self.create_subscription(DiagnosticArray, ifc.DIAGNOSTICS, self._diagnostics, 50)
+        self.create_subscription(Float64MultiArray, ifc.CPG_TEACH_STATE, self._teach_state, 10)
         self.create_subscription(ParameterEvent, ifc.PARAMETER_EVENTS, self._parameter_event, 50)
         self.last_cpg = 0.0
         where = ("bound to localhost only (--foxglove HOST:PORT for another interface)" if is_loopback(host)
@@ -181,6 +185,14 @@ class FoxgloveNode(Node):
             self.ch_cpg.log(cpg_state(names, n_osc, msg.data, t_ns), log_time=t_ns)
         except (ValueError, TypeError) as exc:
             self._warn(ifc.CPG_STATE, exc)
+
+    def _teach_state(self, msg: Float64MultiArray) -> None:
+        if self.ch_teach.has_sinks():
+            try:
+                t_ns = self.newest_stamp_ns()
+                self.ch_teach.log(teach_state(msg.layout.dim, msg.data, t_ns), log_time=t_ns)
+            except (ValueError, TypeError) as exc:
+                self._warn(ifc.CPG_TEACH_STATE, exc)
 
     def _diagnostics(self, msg: DiagnosticArray) -> None:
         if self.ch_diag.has_sinks():

@@ -81,6 +81,14 @@ CPG_STATE_SCHEMA = _obj("cpg_walker.CpgState", {
             "amplitude_rad": {**_NUMS, "description": "each oscillator's amplitude (gain * alpha)"},
             "target_rad": _NUM, "target_rads": _NUM, "offset_rad": _NUM})},
 }, "cpg_node's /cpg/state by DOF name")
+TEACH_STATE_SCHEMA = _obj("cpg_walker.TeachState", {
+    "timestamp": _STAMP,
+    "dofs": {"type": "object", "description": "by DOF (joint) name", "additionalProperties": _obj(
+        "cpg_walker.TeachDof", {
+            "learned_frequency_hz": {**_NUM, "description": "the learning network's main oscillator"},
+            "amplitude_rad": {**_NUM, "description": "its amplitude (gain * |alpha|)"},
+            "error_deg": {**_NUM, "description": "the last stride's RMS teaching error"}})},
+}, "cpg_node's /cpg/teach/state (live teaching) by DOF name")
 CONTACT_SCHEMA = _obj("cpg_walker.Contact", {
     "timestamp": _STAMP,
     **{f"{s}_load_n": {**_NUM, "description": f"{s} sole load (N)"} for s in SIDES},
@@ -127,6 +135,22 @@ def cpg_layout(dims) -> tuple[list[str], int]:
     if len(names) != dims[0].size:
         raise ValueError(f"/cpg/state names {len(names)} DOFs, its layout {dims[0].size}")
     return names, int(dims[1].size) - 1
+
+
+def teach_state(dims, data, t_ns: int) -> dict:
+    """/cpg/teach/state (cpg_node's layout: [dof, value 3]) keyed by DOF name; ValueError if it is not
+    cpg_node's."""
+    if len(dims) != 2 or not dims[0].label.startswith("dof:") or dims[1].size != 3:
+        raise ValueError("not cpg_node's /cpg/teach/state layout [dof, 3]")
+    names = dims[0].label[len("dof:"):].split(",")
+    a = np.asarray(data, dtype=float)
+    if len(names) != dims[0].size or a.size != 3 * len(names):
+        raise ValueError(f"/cpg/teach/state names {len(names)} DOFs, its layout {dims[0].size}, "
+                         f"{a.size} values")
+    a = a.reshape(len(names), 3)
+    return {"timestamp": stamp_dict(t_ns), "dofs": {
+        n: {"learned_frequency_hz": float(r[0]), "amplitude_rad": float(r[1]), "error_deg": float(r[2])}
+        for n, r in zip(names, a, strict=True)}}
 
 
 def diagnostics(statuses, t_ns: int) -> dict:

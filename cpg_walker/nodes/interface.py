@@ -205,10 +205,10 @@ INTERFACES = {i.executable: i for i in (
                   runtime_topics=True),
     NodeInterface(FOXGLOVE_NODE, "a live view of the walking robot in Foxglove (WebSocket server)",
                   subscribes=(JOINT_STATES, JOINT_TARGETS, ODOM_GROUND_TRUTH, *FOOT_LOADS, CPG_STATE,
-                              DIAGNOSTICS, PARAMETER_EVENTS),
-                  note="Serves Foxglove channels /tf, /joint_states, /joint_targets, /cpg/state, /contact, "
-                       "/contact/touchdown, /diagnostics, /robot_description; calls the parameter services "
-                       "of the forwarded parameters' nodes."),
+                              CPG_TEACH_STATE, DIAGNOSTICS, PARAMETER_EVENTS),
+                  note="Serves Foxglove channels /tf, /joint_states, /joint_targets, /cpg/state, "
+                       "/cpg/teach/state, /contact, /contact/touchdown, /diagnostics, /robot_description; "
+                       "calls the parameter services of the forwarded parameters' nodes."),
     NodeInterface(RELAY_NODE, "a degraded link between remapped topics, for fault injection",
                   publishes=(DIAGNOSTICS,),
                   note="Subscribes to each of `topics` (raw) and publishes it again on `prefix` + topic.",

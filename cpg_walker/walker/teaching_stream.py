@@ -1,10 +1,11 @@
 """What a teacher streams to cpg_node's /cpg/teach: a recorded gait as an endless joint-angle signal.
 
-``TeachingStream`` plays a recording (a packaged gait name, e.g. ``walk`` or ``slow``, or a CSV in the
-walk data format) from its start and then its steady stride (``gait_data.find_steady_cycle``) over and
-over, so a short recording teaches for as long as the learning needs (a recording without a stride in
-it: all of it over and over, for the learner to judge); ``speed`` time-scales it (the gait
-at ``speed`` times its frequency: a stream the recorded gaits never were). Teacher time starts at 0.
+``TeachingStream`` plays a recording (a packaged gait name, e.g. ``walk`` or ``slow``, a CSV in the
+walk data format, or a ``Gait`` made elsewhere, e.g. from a bag) from its start and then its steady
+stride (``gait_data.find_steady_cycle``) over and over, so a short recording teaches for as long as the
+learning needs (a recording without a stride in it: all of it over and over, for the learner to judge);
+``speed`` time-scales it (the gait at ``speed`` times its frequency: a stream the recorded gaits never
+were). Teacher time starts at 0.
 """
 
 from __future__ import annotations
@@ -14,17 +15,17 @@ from pathlib import Path
 import numpy as np
 
 from cpg_walker.errors import InputError
-from cpg_walker.robot.gait_data import find_steady_cycle, load_gait
+from cpg_walker.robot.gait_data import Gait, find_steady_cycle, load_gait
 from cpg_walker.walker.controller import DOFS, HumanoidCPG
 
 
 class TeachingStream:
     """The ten DOFs of a recording at teacher time t: the recording, then its steady stride repeated."""
 
-    def __init__(self, gait: str | Path, speed: float = 1.0) -> None:
+    def __init__(self, gait: str | Path | Gait, speed: float = 1.0) -> None:
         if not np.isfinite(speed) or speed <= 0:
             raise InputError(f"the teaching stream's speed must be a positive number, got {speed!r}")
-        rec = load_gait(gait)
+        rec = gait if isinstance(gait, Gait) else load_gait(gait)
         missing = [j for j in DOFS if j not in rec.names]
         if missing:
             raise InputError(f"{rec.source}: the recording lacks the CPG's joint(s) {', '.join(missing)}")
