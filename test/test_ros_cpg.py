@@ -96,7 +96,7 @@ def test_targets_state_and_diagnostics_published(graph, probe):
 
 def test_60s_lockstep_walk_is_deterministic(tmp_path, ros_domain):
     """60 s through sim_node + pid_node + cpg_node (feedback off: the open-loop CPG; with feedback:
-    test_ros_feedback.py) without a fall; a second, 20 s run reproduces the first 20 s of it bit for bit
+    test_ros_feedback.py) without a fall; a second, 10 s run reproduces the first 10 s of it bit for bit
     (lockstep: every period's inputs are fixed by the stamps). However slowly the machine runs it: the
     watchdog only ends a run whose sim time stops advancing."""
     from cpg_walker.experiments.odometry import OdomWatcher
@@ -125,8 +125,8 @@ def test_60s_lockstep_walk_is_deterministic(tmp_path, ros_domain):
     assert drift["samples"] > 5000 and drift["start_offset_m"] < 0.001, drift
     assert drift["position_error_max_pct"] < 1.0 and drift["yaw_error_max_deg"] < 0.2, drift
     with SimWatchdog(ros_domain):
-        run_graph_walk(tmp_path / "walk20", duration=20.0, feedback=False, timeout=sim_deadline(20.0))
-    long, short = (json.loads((tmp_path / d / "graph_record.json").read_text()) for d in ("walk60", "walk20"))
+        run_graph_walk(tmp_path / "walk10", duration=10.0, feedback=False, timeout=sim_deadline(10.0))
+    long, short = (json.loads((tmp_path / d / "graph_record.json").read_text()) for d in ("walk60", "walk10"))
     n = len(short["t"])
     assert n >= 2000 and short["t"] == long["t"][:n]
     np.testing.assert_array_equal(np.array(short["q"]), np.array(long["q"][:n]))  # bit-identical

@@ -59,21 +59,21 @@ def test_a_graph_refuses_a_drifting_stream_then_learns_the_slow_walk_and_walks_i
         env=isolated_env(domain), stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     try:
         bad = teach_graph(tmp_path / "drift", Drift(), rate=RATE, domain_id=domain, attach=True,
-                          wall_limit_s=START_S, progress=lambda s: None)
+                          wall_limit_s=START_S, progress=lambda s: None, after_s=5.0)
         assert not bad["converged"] and "not periodic" in bad["reason"], bad
         assert bad["state"] == "refused" and not bad["took_over"] and not bad["fell"]
         after = bad["after"]  # the walk goes on with its network: walking, not taken over
-        assert after["walked_s"] >= 10.0 and after["distance_m"] > 0.3, after  # ~0.8 m per 10 s
+        assert after["walked_s"] >= 5.0 and after["distance_m"] > 0.15, after  # ~0.4 m per 5 s
         assert after["cpg_state"] == "walking" and after["took_over"] == "0"
         time.sleep(live_teaching_config().stall_s + 0.5)  # a pause: the next stream starts a new teaching
         stream = StreamTeacher("slow", 1.0)
         res = teach_graph(tmp_path / "slow", stream, rate=RATE, take_over=True, save=tmp_path / "slow.yaml",
-                          duration=10.0, domain_id=domain, attach=True, wall_limit_s=10 * START_S,
+                          duration=6.0, domain_id=domain, attach=True, wall_limit_s=10 * START_S,
                           progress=lambda s: None)
         assert res["converged"] and res["learned_frequency_hz"] == pytest.approx(stream.frequency_hz,
                                                                                  rel=0.01), res
-        assert res["took_over"] and not res["fell"] and res["walked_s"] >= 10.0, res
-        assert res["distance_m"] > 0.25, res  # 0.80 m in 15 s measured
+        assert res["took_over"] and not res["fell"] and res["walked_s"] >= 6.0, res
+        assert res["distance_m"] > 0.15, res  # 0.80 m in 15 s measured (the cross-fade's 2 s included)
         saved = storage.load(tmp_path / "slow.yaml")
         assert saved.gait_frequency_hz() == pytest.approx(res["learned_frequency_hz"], rel=1e-5)
     finally:

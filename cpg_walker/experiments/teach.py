@@ -87,10 +87,11 @@ class StreamTeacher:
 def teach_graph(out: str | Path, teacher, rate: float = 10.0, take_over: bool = False,
                 save: str | Path | None = None, duration: float = 60.0, domain_id: int | None = None,
                 attach: bool = False, pacing: str = "lockstep", params: list[str] | None = None,
-                wall_limit_s: float = 3600.0, progress=print) -> dict:
-    """``_teach`` and, for a graph it started, the nodes' own timing once they stopped (``node_timing``)."""
+                wall_limit_s: float = 3600.0, progress=print, after_s: float = AFTER_REFUSAL_S) -> dict:
+    """``_teach`` and, for a graph it started, the nodes' own timing once they stopped (``node_timing``).
+    ``after_s``: sim s the walk is watched after a refusal."""
     res = _teach(Path(out), teacher, rate, take_over, save, duration, domain_id, attach, pacing, params,
-                 wall_limit_s, progress)
+                 wall_limit_s, progress, after_s)
     if not attach:
         res["node_timing"] = node_timing(Path(out) / "logs")
         _write(Path(out), res)
@@ -119,7 +120,7 @@ def node_timing(logs: Path) -> dict:
 
 def _teach(out: Path, teacher, rate: float, take_over: bool, save: str | Path | None, duration: float,
            domain_id: int | None, attach: bool, pacing: str, params: list[str] | None, wall_limit_s: float,
-           progress) -> dict:
+           progress, after_s: float) -> dict:
     """Teach a graph (started with ``pacing`` and ``cpg-walker graph -p`` ``params``; or attached to) from
     ``teacher`` at ``rate``; write and return teach.json's contents (``fell``: during the teaching or the
     taught walk)."""
@@ -212,8 +213,8 @@ def _teach(out: Path, teacher, rate: float, take_over: bool, save: str | Path | 
             res["reason"] = res["reason"] or f"not converged within {wall_limit_s:g} wall s"
             if odom and not fallen:  # the walk goes on, its network untouched: watch it a while
                 t_end = odom[-1][0]
-                probe.wait(lambda: odom[-1][0] >= t_end + AFTER_REFUSAL_S or bool(fallen),
-                           f"{AFTER_REFUSAL_S:g} sim s of walking after the refusal", 10 * NO_STATUS_S)
+                probe.wait(lambda: odom[-1][0] >= t_end + after_s or bool(fallen),
+                           f"{after_s:g} sim s of walking after the refusal", 10 * NO_STATUS_S)
                 cpg = probe.status("cpg_walker/cpg")
                 res["after"] = {**_walked(odom, t_end), "fell": bool(fallen), "cpg_state": cpg.get("state"),
                                 "took_over": status().get("teaching_took_over")}
