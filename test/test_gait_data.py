@@ -126,7 +126,7 @@ def test_loads_are_cached_by_content(tmp_path):
 def test_steady_cycle_is_cached_by_content():
     g = load_gait("walk")
     c = find_steady_cycle(g)
-    assert find_steady_cycle(g) is c and c == _search_steady_cycle(g, 0.8, 0.15, 0.03)
+    assert find_steady_cycle(g) is c and c == _search_steady_cycle(g, 0.8, 0.15, 0.03, 1.5, 4.0)
     # another recording with the same source name but other samples gets its own search
     shorter = Gait(g.name, g.names, g.t[:-400].copy(), g.q[:-400].copy(), g.source)
     c2 = find_steady_cycle(shorter)

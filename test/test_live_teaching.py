@@ -258,3 +258,24 @@ def test_the_driver_learns_from_teach_samples_takes_over_and_saves(tmp_path):
     assert CPGGaitSource(saved).transition == "standing"  # its phase 0 is the stream's, not the recording's
     work = d.summary()["teaching"]["work_ms"]
     assert work is not None and work["max"] > 0
+
+
+def test_a_recording_time_scaled_in_its_csv_is_learned_at_its_frequency(tmp_path):
+    """The walk's CSV with its time column halved (0.80 Hz: a stride of 1.26 s, shorter than any recorded
+    one): its steady stride is found (TeachingStream searches the live teaching's period range) and the
+    stream learned at its frequency, the teacher's estimate too (the shortest of the lags that correlate
+    about as well, not two strides)."""
+    from cpg_walker.robot.gait_data import load_gait
+
+    walk = load_gait("walk")
+    path = tmp_path / "walk_fast.csv"
+    rows = (f"{t:.6f}," + ",".join(f"{x:.6f}" for x in q) for t, q in zip(walk.t * 0.5, walk.q, strict=True))
+    path.write_text("time_s," + ",".join(walk.names) + "\n" + "\n".join(rows) + "\n")
+    stream = TeachingStream(path)
+    assert stream.periodic and stream.frequency_hz == pytest.approx(2 / 2.513, rel=1e-3)
+    teacher = _teacher()
+    _feed(teacher, stream.at)
+    assert teacher.state == CONVERGED, teacher.reason
+    info = teacher.result_info
+    assert info["learned_frequency_hz"] == pytest.approx(stream.frequency_hz, rel=0.01)
+    assert info["teacher_frequency_hz"] == pytest.approx(stream.frequency_hz, rel=0.01)

@@ -210,13 +210,16 @@ def estimate_period(gait: Gait, settle: float | None = None, lo: float = 1.5, hi
 
 
 def autocorrelation_period(q: np.ndarray, dt: float, lo: float, hi: float, keep_s: float,
-                           refine: bool = False, dip: float | None = None) -> tuple[float | None, float]:
+                           refine: bool = False, dip: float | None = None,
+                           shortest_within: float | None = None) -> tuple[float | None, float]:
     """(period s, its normalised autocorrelation) of uniform samples ``q`` (n, k), the lag in [lo, hi] s
     whose overlap is at least ``keep_s`` long that correlates best (None, -inf when there is none): at lag
     L, Σ q[:-L]·q[L:] / √(Σ q[:-L]² Σ q[L:]²) after removing the mean, every lag at once by FFT.
     ``refine``: the peak placed between samples by a parabola through its neighbours (at most half a
     sample away). ``dip``: only lags past the first one correlating below ``dip`` count (a slowly
-    drifting signal, which correlates well at every short lag, then has no period: (None, nan))."""
+    drifting signal, which correlates well at every short lag, then has no period: (None, nan)).
+    ``shortest_within``: the shortest lag at a local peak within this of the best (not a multiple of the
+    period that happens to correlate a little better)."""
     q = np.asarray(q, dtype=float)
     q = (q - q.mean(0)).reshape(len(q), -1)
     n = len(q)
@@ -235,6 +238,12 @@ def autocorrelation_period(q: np.ndarray, dt: float, lo: float, hi: float, keep_
             return None, float("nan")
     best_lag = first + int(np.argmax(corr[first:last]))
     best = float(corr[best_lag])
+    if shortest_within is not None:
+        c = corr[first:last]
+        peak = np.flatnonzero((c[1:-1] >= c[:-2]) & (c[1:-1] >= c[2:]) & (c[1:-1] >= best - shortest_within))
+        if peak.size:
+            best_lag = first + 1 + int(peak[0])
+            best = float(corr[best_lag])
     lag = float(best_lag)
     if refine and best_lag > 1 and best_lag + 1 <= last:
         left, right = corr[best_lag - 1], corr[best_lag + 1]
@@ -244,27 +253,30 @@ def autocorrelation_period(q: np.ndarray, dt: float, lo: float, hi: float, keep_
     return float(lag * dt), best
 
 
-def find_steady_cycle(gait: Gait, tail: float = 0.8, spread: float = 0.15, window: float = 0.03) -> Cycle:
+def find_steady_cycle(gait: Gait, tail: float = 0.8, spread: float = 0.15, window: float = 0.03,
+                      lo: float = 1.5, hi: float = 4.0) -> Cycle:
     """The last full stride of the recording, with its seam where the signal matches best (cached by
     the recording's content and the arguments: the search takes about a second).
 
     The cycle ends at some ``e`` in the last ``tail`` seconds and starts at ``e - T`` with ``T`` within
-    ``spread`` of the autocorrelation period; ``(start, T)`` minimise the squared mismatch of the leg angles
-    (and of their velocities, weighted by 0.05 s) over a ``window`` around the seam, so repeating
+    ``spread`` of the autocorrelation period (searched in [``lo``, ``hi``] s); ``(start, T)`` minimise the
+    squared mismatch of the leg angles (and of their velocities, weighted by 0.05 s) over a ``window``
+    around the seam, so repeating
     ``[start, start + T)`` after the recording continues it without a jump."""
     digest = hashlib.blake2b(digest_size=16)
     head = repr((gait.names, gait.t.shape, gait.t.dtype.str, gait.q.shape, gait.q.dtype.str)).encode()
     for part in (head, gait.t, gait.q):
         digest.update(np.ascontiguousarray(part).data if isinstance(part, np.ndarray) else part)
-    key = (digest.hexdigest(), float(tail), float(spread), float(window))
-    return _cached(_CYCLES, key, lambda: _search_steady_cycle(gait, tail, spread, window))
+    key = (digest.hexdigest(), float(tail), float(spread), float(window), float(lo), float(hi))
+    return _cached(_CYCLES, key, lambda: _search_steady_cycle(gait, tail, spread, window, lo, hi))
 
 
 _CYCLES: dict[tuple, Cycle] = {}  # find_steady_cycle's results by (content digest, arguments)
 
 
-def _search_steady_cycle(gait: Gait, tail: float, spread: float, window: float) -> Cycle:
-    period = estimate_period(gait)
+def _search_steady_cycle(gait: Gait, tail: float, spread: float, window: float, lo: float,
+                         hi: float) -> Cycle:
+    period = estimate_period(gait, lo=lo, hi=hi)
     legs = [gait.names.index(j) for j in LEG_JOINTS if j in gait.names]
     q = gait.q[:, legs]
     v = gait.velocities()[:, legs] * 0.05

@@ -51,6 +51,9 @@ RESAMPLE_DT = 0.005
 #: A period is a lag past the first at which the stream correlates below this (a drifting signal correlates
 #: well at every short lag without repeating).
 PERIOD_DIP = 0.5
+#: The period is the shortest lag whose peak correlates within this of the best (two strides correlate about
+#: as well as one).
+PERIOD_NEAR_BEST = 0.02
 #: Teacher s between two period searches while collecting.
 SEARCH_EVERY_S = 1.0
 
@@ -286,7 +289,8 @@ class LiveTeacher:
         end = self._t[-1]
         _, q = self._uniform(end - cfg.window_s, end)
         return autocorrelation_period(q, RESAMPLE_DT, cfg.min_period_s, cfg.max_period_s,
-                                      keep_s=cfg.window_s - cfg.max_period_s, refine=True, dip=PERIOD_DIP)
+                                      keep_s=cfg.window_s - cfg.max_period_s, refine=True, dip=PERIOD_DIP,
+                                      shortest_within=PERIOD_NEAR_BEST)
 
     def _end_chunk(self) -> None:
         s, net = self.settings, self.net

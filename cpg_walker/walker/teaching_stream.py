@@ -17,6 +17,7 @@ import numpy as np
 from cpg_walker.errors import InputError
 from cpg_walker.robot.gait_data import Gait, find_steady_cycle, load_gait
 from cpg_walker.walker.controller import DOFS, HumanoidCPG
+from cpg_walker.walker.learning import live_teaching_config
 
 
 class TeachingStream:
@@ -31,8 +32,9 @@ class TeachingStream:
             raise InputError(f"{rec.source}: the recording lacks the CPG's joint(s) {', '.join(missing)}")
         cols = [rec.names.index(j) for j in DOFS]
         self.gait = rec.__class__(rec.name, DOFS, rec.t, rec.q[:, cols], rec.source)
+        cfg = live_teaching_config()  # a stride as long as cpg_node looks for
         try:
-            cyc = find_steady_cycle(rec)
+            cyc = find_steady_cycle(rec, lo=cfg.min_period_s, hi=cfg.max_period_s)
             self.cycle_start, self.cycle_period = float(cyc.start), float(cyc.period)
             self.periodic = True
         except InputError:  # no gait in it: the whole recording over and over (cpg_node will judge it)
