@@ -179,8 +179,9 @@ def test_the_settings_are_checked():
 def test_the_driver_learns_from_teach_samples_takes_over_and_saves(tmp_path):
     """CPGDriver (cpg_node's logic) standing at α 0 (the gait fixed by its commands, no physics): taught
     the slow walk at 10 teacher s per sim s (a teacher at --rate 10 on a realtime sim), take-over is refused
-    with the reason until the learning converges; then the taught network walks, phase-matched and
-    cross-faded (no jump in the targets), and is saved as a file cpg_file loads (starting from standing)."""
+    with the reason until the learning converges; asked while walking, it stops the robot, switches in
+    standing, cross-fades (no jump in the targets) and steps off again; saved as a file cpg_file loads
+    (starting from standing)."""
     from cpg_walker.walker import storage
     from cpg_walker.walker.cmd_vel import CmdVelLimits, SpeedMap
     from cpg_walker.walker.cpg_driver import CPGDriver, FeedbackFade
@@ -243,10 +244,17 @@ def test_the_driver_learns_from_teach_samples_takes_over_and_saves(tmp_path):
         t_ns += period_ns
     before = len(out.sent)
     message = d.take_over()
-    assert "took over" in message and d.ctrl.meta["teaching"]["phase"] == "stream"
-    for _ in range(2000):
+    assert "taking over" in message and d.pending is not None
+    with pytest.raises(ValueError, match="already under way"):
+        d.take_over()
+    while d.pending is not None and t_ns < 200_000_000_000:  # it stops first, then switches
         d.clock(t_ns)
         t_ns += period_ns
+    assert d.ctrl.meta["teaching"]["phase"] == "stream" and d.ctrl.alpha < 0.01
+    for _ in range(2000):  # the cross-fade, then stepping off
+        d.clock(t_ns)
+        t_ns += period_ns
+    assert d.ctrl.alpha_command > 0
     q = np.array([q for _, q in out.sent[before - 5:]])
     steps = np.abs(np.diff(q, axis=0)).max()
     assert steps < 0.01, steps  # rad per 2 ms: continuous through the hand-over (the gait: ~0.002)

@@ -128,7 +128,7 @@ def test_60s_lockstep_walk_is_deterministic(tmp_path, ros_domain):
         run_graph_walk(tmp_path / "walk10", duration=10.0, feedback=False, timeout=sim_deadline(10.0))
     long, short = (json.loads((tmp_path / d / "graph_record.json").read_text()) for d in ("walk60", "walk10"))
     n = len(short["t"])
-    assert n >= 2000 and short["t"] == long["t"][:n]
+    assert n >= 1000 and short["t"] == long["t"][:n]  # 10 s of the 10 ms record
     np.testing.assert_array_equal(np.array(short["q"]), np.array(long["q"][:n]))  # bit-identical
     np.testing.assert_array_equal(np.array(short["base_xy"]), np.array(long["base_xy"][:n]))
 

@@ -237,14 +237,22 @@ def _teach(out: Path, teacher, rate: float, take_over: bool, save: str | Path | 
                 raise InputError(f"cpg_node could not save the taught network: {answer.message}")
             res["saved"] = path
         if take_over and not fallen:
+            taken = int(status().get("teaching_took_over", "0"))
             answer = probe.call(Trigger, "/cpg/take_over")
             res["take_over_message"] = answer.message
             if not answer.success:
                 raise InputError(f"cpg_node refused the take-over: {answer.message}")
-            res["took_over"] = True
-            result = probe.set_param("cpg", "alpha", 1.0)
+            result = probe.set_param("cpg", "alpha", 1.0)  # applies once the taught network has taken over
             if not result.successful:
                 raise InputError(f"cpg_node refused alpha 1: {result.reason}")
+            progress("teach: the robot stops; the taught network takes over standing")
+            probe.wait(lambda: int(status().get("teaching_took_over", "0")) > taken or bool(fallen),
+                       "the take-over (the robot standing)", 10 * NO_STATUS_S)
+            res["took_over"] = not fallen
+            if fallen:
+                res.update(fell=True, fell_at_s=round(fallen[0], 2))
+                return _write(out, res)
+            res["took_over_at_s"] = float(status()["teaching_took_over_at_s"])
             probe.wait(lambda: bool(odom), "/odom/ground_truth", NO_STATUS_S)
             t_start = odom[-1][0]
             res["walk_from_s"] = round(t_start, 3)

@@ -44,6 +44,8 @@ WARM_UP_COMMAND = 0.9
 REJOIN_AFTER_S = 0.1
 #: Targets kept by stamp, to re-send a re-sent tick's targets identically.
 RECENT_KEEP = 4
+#: A take-over switches networks once the applied α is below this (the robot stands).
+TAKE_OVER_ALPHA = 0.01
 #: The driver's stages, as reported on /diagnostics ``state``.
 STAGES = ("learning", "converged", "starting", "walking")
 
@@ -172,7 +174,9 @@ class CPGDriver:
         self.teacher = teacher  # live teaching (/cpg/teach), None: off
         self.teach_steps, self.teach_blend_s = int(teach_steps), float(teach_blend_s)
         self.teach_counts = {"received": 0, "took_over": 0, "saved": 0}
+        self.pending: HumanoidCPG | None = None  # a taught network waiting for the robot to stand
         self.teach_work: deque[float] = deque(maxlen=10_000)  # wall s of learning per call (flat memory)
+        self.took_over_at_s: float | None = None
         self._teach_logged: tuple[str, str] | None = None
         self.ctrl = ctrl
         self.learned_network = storage.to_dict(ctrl)  # the loaded network, to start over from (a sim reset)
@@ -274,6 +278,10 @@ class CPGDriver:
         """Command ζ and α (the parameters' path); returns the sim time from which they apply. While
         following /cmd_vel they hold until the next Twist."""
         self.zeta, self.alpha = float(zeta), float(alpha)
+        if self.pending is not None:  # a take-over stands the robot first: these follow it
+            self.out.log("info", f"zeta={zeta:g}, alpha={alpha:g} apply once the taught network has "
+                         "taken over")
+            return (self.last_tick_ns or 0) / 1e9
         deferred = self.source.command(self.zeta, self.alpha)
         after = self.walk_from_s if deferred else (self.last_tick_ns or 0) / 1e9
         self.out.log("info", f"commanded zeta={zeta:g}, alpha={alpha:g} after sim {after:.3f} s")
@@ -337,7 +345,8 @@ class CPGDriver:
 
     def _cmd_vel_tick(self, t_ns: int) -> None:
         """Apply the follower's output for tick t_ns (once the CPG has taken over)."""
-        if self.cmd.last is None or self.cmd_override or t_ns < self.walk_from_s * 1e9:
+        if self.cmd.last is None or self.cmd_override or t_ns < self.walk_from_s * 1e9 \
+                or self.pending is not None:  # a take-over stands the robot first
             return
         fb = self.source.fb
         reason = turn_unavailable(self.feedback_on, self.fade.weight, fb.pathways)
@@ -548,6 +557,7 @@ class CPGDriver:
         self.activity.tick()
         new = self.last_tick_ns is None or t_ns > self.last_tick_ns
         if new:
+            self._take_over_tick(t_ns)
             self._cmd_vel_tick(t_ns)
             self._feedback_tick(t_ns)
         if not new or t_ns != self.sent_ns:  # a re-sent tick: its target again (it may have been lost;
@@ -671,20 +681,37 @@ class CPGDriver:
         return ctrl
 
     def take_over(self) -> str:
-        """The last converged taught network walks from now on (``FeedbackGaitSource.switch``: phase
-        matched, ζ/α carried over, cross-faded over ``teach_blend_s``); a sim reset starts over from it.
-        Returns what happened; ValueError with the reason when it cannot."""
+        """The last converged taught network walks from now on, through standing: the robot stops (α → 0
+        through the governor; commands and /cmd_vel wait), the taught network cross-fades in standing
+        (``FeedbackGaitSource.switch``: phase matched, ζ carried over, over ``teach_blend_s``), then the
+        requested ζ/α (or /cmd_vel) step off on it. Handing over mid-stride from the walk to the taught slow
+        walk fell in 1 of 3 graph runs, 2.6 s after. A sim reset starts over from the taught network.
+        Returns what will happen; ValueError with the reason when it cannot."""
         ctrl = self.taught()
         if self.last_tick_ns is None or self.source.t_net < self.walk_from_s:
             raise ValueError("the CPG has not taken over from the start-up yet: try again once it walks or "
                              "stands on the CPG")
+        if self.pending is not None:
+            raise ValueError("a take-over is already under way (the robot is stopping)")
+        self.pending = ctrl
+        self.source.command(self.ctrl.zeta_command, 0.0)
+        return (f"taking over with the taught network ({ctrl.gait_frequency_hz():.4f} Hz): stopping at sim "
+                f"{self.last_tick_ns / 1e9:.3f} s, then cross-fading over {self.teach_blend_s:g} s standing, "
+                f"then zeta {self.zeta:g}, alpha {self.alpha:g}")
+
+    def _take_over_tick(self, t_ns: int) -> None:
+        """A pending take-over switches networks once the robot stands (applied α below TAKE_OVER_ALPHA)."""
+        ctrl = self.pending
+        if ctrl is None or self.ctrl.alpha > TAKE_OVER_ALPHA or self.ctrl.alpha_command > 0.0:
+            return
         phase = self.source.switch(ctrl, self.teach_blend_s)
-        self.ctrl = ctrl
+        self.ctrl, self.pending = ctrl, None
         self.learned_network = storage.to_dict(ctrl)
         self.teach_counts["took_over"] += 1
-        return (f"the taught network ({ctrl.gait_frequency_hz():.4f} Hz) took over at sim "
-                f"{self.last_tick_ns / 1e9:.3f} s, {phase:.3f} s into its cycle, cross-fading over "
-                f"{self.teach_blend_s:g} s")
+        self.took_over_at_s = t_ns / 1e9
+        self.source.command(self.zeta, self.alpha)
+        self.out.log("info", f"the taught network took over standing at sim {t_ns / 1e9:.3f} s, "
+                     f"{phase:.3f} s into its cycle; zeta {self.zeta:g}, alpha {self.alpha:g} from now on")
 
     def save_taught(self, path) -> str:
         """Write the last converged taught network as a CPG YAML that ``cpg_file`` loads; returns the path."""
@@ -702,6 +729,9 @@ class CPGDriver:
              "teaching_received": str(self.teach_counts["received"]),
              "teaching_streams": str(p["teachings"]),
              "teaching_took_over": str(self.teach_counts["took_over"]),
+             "teaching_take_over_pending": str(self.pending is not None).lower(),
+             "teaching_took_over_at_s": "none" if self.took_over_at_s is None
+             else f"{self.took_over_at_s:.3f}",
              "teaching_converged_result": str(p["converged_result"]).lower()}
         for key in ("teacher_s", "strides", "teacher_frequency_hz", "correlation"):
             if key in p:
@@ -777,4 +807,5 @@ class CPGDriver:
             "max": round(float(work.max()), 4), "p99": round(float(np.percentile(work, 99)), 4),
             "mean": round(float(work.mean()), 4)}
         return {"enabled": True, **self.teach_counts, "state": teacher.state, "reason": teacher.reason,
-                "result": teacher.result_info, "calls": len(work), "work_ms": stats}
+                "result": teacher.result_info, "took_over_at_s": self.took_over_at_s, "calls": len(work),
+                "work_ms": stats}
