@@ -127,6 +127,8 @@ NUMBERS = [
     (["teach", "--gait", "walk", "--out", "{out}"], "--rate", not_positive),
     (["teach", "--gait", "walk", "--out", "{out}"], "--speed", not_positive),
     (["teach", "--gait", "walk", "--out", "{out}"], "--duration", not_positive),
+    (["teach", "--gait", "walk", "--out", "{out}"], "--alpha",
+     lambda: floats_outside(0.0, 1.0) | not_a_number()),
     (["feedback-search", "--out", "{out}"], "--generations", lambda: ints_below(1)),
     (["feedback-search", "--out", "{out}"], "--popsize", lambda: ints_below(2)),
     (["feedback-search", "--out", "{out}"], "--jobs", lambda: ints_below(1)),

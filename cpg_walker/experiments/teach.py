@@ -3,7 +3,8 @@
 stream a teacher's joint angles
 on /cpg/teach at ``rate`` teacher s per wall s (stamps in the teacher's time), follow cpg_node's
 ``cpg_walker/teaching`` status until the learning converges or is refused, then optionally save the
-taught network (~/save_taught) and take over (~/take_over) and walk it for ``duration`` sim s at α 1,
+taught network (~/save_taught) and take over (~/take_over) and walk it for ``duration`` sim s at
+``alpha`` (TAUGHT_ALPHA),
 watching /odom/ground_truth and /sim/fallen. DIR/teach.json.
 
 Teachers (walker/teaching_stream.py ``TeachingStream``): a packaged gait (walk, slow), a CSV in the walk
@@ -31,6 +32,10 @@ from cpg_walker.robot.gait_data import Gait
 SAMPLE_DT = 0.01
 #: Wall s without a teaching status from cpg_node after which the teaching gives up (no graph there).
 NO_STATUS_S = 60.0
+#: α the taught network walks at after a take-over (``--alpha``): the slow walk taught live, taking over
+#: through standing in-process at 8 phases of the walk and walking 60 s open loop, fell in 2 of 8 at α 1
+#: (20 s after stepping off, once the steps had grown to full length), in 0 of 8 at α 0.8.
+TAUGHT_ALPHA = 0.8
 #: Sim s the walk is watched after a refused teaching (it goes on with its network untouched).
 AFTER_REFUSAL_S = 10.0
 #: Sim s of a started graph (it is stopped once the teaching and the walk are over).
@@ -87,11 +92,12 @@ class StreamTeacher:
 def teach_graph(out: str | Path, teacher, rate: float = 10.0, take_over: bool = False,
                 save: str | Path | None = None, duration: float = 60.0, domain_id: int | None = None,
                 attach: bool = False, pacing: str = "lockstep", params: list[str] | None = None,
-                wall_limit_s: float = 3600.0, progress=print, after_s: float = AFTER_REFUSAL_S) -> dict:
+                wall_limit_s: float = 3600.0, progress=print, after_s: float = AFTER_REFUSAL_S,
+                alpha: float = TAUGHT_ALPHA) -> dict:
     """``_teach`` and, for a graph it started, the nodes' own timing once they stopped (``node_timing``).
-    ``after_s``: sim s the walk is watched after a refusal."""
+    ``after_s``: sim s the walk is watched after a refusal; ``alpha``: the taught walk's after a take-over."""
     res = _teach(Path(out), teacher, rate, take_over, save, duration, domain_id, attach, pacing, params,
-                 wall_limit_s, progress, after_s)
+                 wall_limit_s, progress, after_s, alpha)
     if not attach:
         res["node_timing"] = node_timing(Path(out) / "logs")
         _write(Path(out), res)
@@ -120,7 +126,7 @@ def node_timing(logs: Path) -> dict:
 
 def _teach(out: Path, teacher, rate: float, take_over: bool, save: str | Path | None, duration: float,
            domain_id: int | None, attach: bool, pacing: str, params: list[str] | None, wall_limit_s: float,
-           progress, after_s: float) -> dict:
+           progress, after_s: float, alpha: float) -> dict:
     """Teach a graph (started with ``pacing`` and ``cpg-walker graph -p`` ``params``; or attached to) from
     ``teacher`` at ``rate``; write and return teach.json's contents (``fell``: during the teaching or the
     taught walk)."""
@@ -242,9 +248,10 @@ def _teach(out: Path, teacher, rate: float, take_over: bool, save: str | Path | 
             res["take_over_message"] = answer.message
             if not answer.success:
                 raise InputError(f"cpg_node refused the take-over: {answer.message}")
-            result = probe.set_param("cpg", "alpha", 1.0)  # applies once the taught network has taken over
+            result = probe.set_param("cpg", "alpha", alpha)  # applies once the taught network has taken over
             if not result.successful:
-                raise InputError(f"cpg_node refused alpha 1: {result.reason}")
+                raise InputError(f"cpg_node refused alpha {alpha:g}: {result.reason}")
+            res["alpha"] = alpha
             progress("teach: the robot stops; the taught network takes over standing")
             probe.wait(lambda: int(status().get("teaching_took_over", "0")) > taken or bool(fallen),
                        "the take-over (the robot standing)", 10 * NO_STATUS_S)
