@@ -287,3 +287,46 @@ def test_a_recording_time_scaled_in_its_csv_is_learned_at_its_frequency(tmp_path
     info = teacher.result_info
     assert info["learned_frequency_hz"] == pytest.approx(stream.frequency_hz, rel=0.01)
     assert info["teacher_frequency_hz"] == pytest.approx(stream.frequency_hz, rel=0.01)
+
+
+def test_the_taught_slow_walk_taken_over_through_standing_walks(slow):
+    """cpg_node's take-over, in-process with physics (its sequence on the gait source: stop through the
+    governor, switch standing, step off at teach's α 0.8), from the walk open loop at 10.0 s, one of the
+    two phases (of 8) at which stepping off to α 1 fell about 20 s later; then 60 s of the taught gait."""
+    from cpg_walker.experiments.teach import TAUGHT_ALPHA
+    from cpg_walker.robot.hoap2 import Hoap2Sim
+    from cpg_walker.robot.pid import PidLaw
+    from cpg_walker.walker import storage
+    from cpg_walker.walker.cpg_driver import TAKE_OVER_ALPHA
+    from cpg_walker.walker.gait_source import CPGGaitSource
+    from cpg_walker.walker.governor import GovernorConfig
+    from cpg_walker.walker.learning import cpg_defaults, load_controller
+    from cpg_walker.walker.loop import run_replay
+
+    teacher, _ = slow
+    source = CPGGaitSource(load_controller(cpg_defaults()["cpg_file"])[0], governor=GovernorConfig.load())
+    taught = storage.from_dict(storage.to_dict(teacher.result))
+    events: dict[str, float] = {}
+
+    class TakingOver:
+        names = source.names
+
+        def targets(self, t: float):
+            if "asked" not in events and t >= 10.0:
+                source.command(source.ctrl.zeta_command, 0.0)
+                events["asked"] = t
+            elif "asked" in events and "switched" not in events and source.ctrl.alpha < TAKE_OVER_ALPHA:
+                source.switch(taught, 2.0)
+                source.command(1.0, TAUGHT_ALPHA)
+                events["switched"] = t
+            return source.targets(t)
+
+    sim = Hoap2Sim()
+    sim.reset()
+    r = run_replay(sim, TakingOver(), PidLaw.from_config(), 75.0)
+    assert not r.fell, (r.fall_time_s, events)
+    assert 10.0 < events["switched"] < 15.0 and source.ctrl is taught
+    xy = np.asarray(r.base_xy)
+    t = np.asarray(r.t)
+    after = xy[-1] - xy[np.searchsorted(t, events["switched"])]
+    assert float(np.hypot(*after)) > 1.2  # measured 1.69 m in the 61.5 s after the switch
