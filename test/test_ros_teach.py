@@ -9,8 +9,6 @@ cpg:alpha=1.0 -p cpg:teach_steps=8`): 0.3907 Hz learned against 0.3906, 13 wall 
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -47,7 +45,7 @@ def test_a_graph_refuses_a_drifting_stream_then_learns_the_slow_walk_and_walks_i
     from ros_helpers import START_S, Probe, kill_nodes, reserve_domain, sim_deadline
 
     from cpg_walker.experiments.teach import StreamTeacher, teach_graph
-    from cpg_walker.graph.processes import isolated_env
+    from cpg_walker.graph.processes import interrupt_group, isolated_env
     from cpg_walker.walker import storage
     from cpg_walker.walker.learning import live_teaching_config
 
@@ -83,13 +81,7 @@ def test_a_graph_refuses_a_drifting_stream_then_learns_the_slow_walk_and_walks_i
         saved = storage.load(tmp_path / "slow.yaml")
         assert saved.gait_frequency_hz() == pytest.approx(res["learned_frequency_hz"], rel=1e-5)
     finally:
-        if graph.poll() is None:
-            os.killpg(graph.pid, signal.SIGINT)
-            try:
-                graph.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(graph.pid, signal.SIGKILL)
-                graph.wait()
+        interrupt_group(graph)
         kill_nodes(domain)
         lock.close()
         log.close()

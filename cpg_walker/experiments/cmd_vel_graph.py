@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
 import sys
 import time
@@ -58,7 +57,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     from std_msgs.msg import Bool
 
     from cpg_walker.graph.probe import Probe
-    from cpg_walker.graph.processes import env_domain_id, isolated_env, quiet_domain_id
+    from cpg_walker.graph.processes import env_domain_id, interrupt_group, isolated_env, quiet_domain_id
     from cpg_walker.graph.runner import resolve_domain
 
     out = Path(out)
@@ -155,15 +154,7 @@ def drive_graph(out: str | Path, domain_id: int | None = None, attach: bool = Fa
     finally:
         probe.close()
         if proc is not None:
-            if proc.poll() is None:
-                import signal
-
-                os.killpg(proc.pid, signal.SIGINT)
-                try:
-                    proc.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    os.killpg(proc.pid, signal.SIGKILL)
-                    proc.wait()
+            interrupt_group(proc)
     where = f"see {out}/graph.log" if proc is not None else "is a graph running there?"
     if t0 is None or not sent:
         raise ValueError(f"no /odom/ground_truth from a graph on DDS domain {domain} ({where})")

@@ -15,8 +15,6 @@ repeated, optionally time-scaled (``speed``: the gait at that many times its fre
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -138,7 +136,7 @@ def _teach(out: Path, teacher, rate: float, take_over: bool, save: str | Path | 
     from std_srvs.srv import Trigger
 
     from cpg_walker.graph.probe import Probe
-    from cpg_walker.graph.processes import env_domain_id, isolated_env, quiet_domain_id
+    from cpg_walker.graph.processes import env_domain_id, interrupt_group, isolated_env, quiet_domain_id
     from cpg_walker.graph.runner import resolve_domain
 
     if not (rate > 0 and np.isfinite(rate)):
@@ -279,13 +277,8 @@ def _teach(out: Path, teacher, rate: float, take_over: bool, save: str | Path | 
         return _write(out, res)
     finally:
         probe.close()
-        if proc is not None and proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGINT)
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
+        if proc is not None:
+            interrupt_group(proc)
 
 
 def _walked(odom: list[tuple[float, float, float]], since: float) -> dict:

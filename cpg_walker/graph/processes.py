@@ -299,6 +299,19 @@ class Graph:
         self.stop_all()
 
 
+def interrupt_group(popen: subprocess.Popen, timeout: float = 30.0) -> int:
+    """Stop a command started in its own session (``start_new_session``) as Ctrl-C would: SIGINT to its
+    process group, then SIGKILL if it has not ended within ``timeout`` s; its exit code."""
+    if popen.poll() is None:
+        _signal_group(popen.pid, signal.SIGINT)
+        try:
+            popen.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            _signal_group(popen.pid, signal.SIGKILL)
+            popen.wait()
+    return popen.returncode
+
+
 def _signal_group(pid: int, sig: int) -> None:
     try:
         os.killpg(pid, sig)

@@ -147,7 +147,7 @@ class CPGNode(Node):
             subs.append(self.create_subscription(JointState, ifc.CPG_TEACH, self._on_teach, 1000))
             self.create_service(Trigger, "~/take_over", self._on_take_over)
             self.create_service(Trigger, "~/save_taught", self._on_save_taught)
-            self.teach_pub = None  # made at the first learning state: no empty topic in a graph never taught
+            self.teach_pub = self.create_publisher(Float64MultiArray, ifc.CPG_TEACH_STATE, ifc.DEPTH)
             self.teach_msg = Float64MultiArray(layout=teach_state_layout(self.driver.teacher.names))
         self.hot = HotPath(self, subs)
         self._diagnostics(0, "converged", {})
@@ -180,8 +180,6 @@ class CPGNode(Node):
         if self.teaching:
             progress = self.driver.teacher.progress()
             if "error_deg" in progress:  # learning
-                if self.teach_pub is None:
-                    self.teach_pub = self.create_publisher(Float64MultiArray, ifc.CPG_TEACH_STATE, ifc.DEPTH)
                 self.teach_msg.data = darray(np.array([progress[k] for k in TEACH_STATE_VALUES]).T.ravel())
                 self.teach_pub.publish(self.teach_msg)
 
