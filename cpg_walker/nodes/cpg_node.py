@@ -63,6 +63,8 @@ def state_layout(names, n_osc: int) -> MultiArrayLayout:
     ], data_offset=0)
 
 
+#: /cpg/teach messages held for the node (5 wall s of a teacher at 10 x real time, 100 Hz).
+TEACH_DEPTH = 5000
 #: /cpg/teach/state's values per joint.
 TEACH_STATE_VALUES = ("learned_frequency_hz", "amplitude_rad", "error_deg")
 
@@ -143,8 +145,9 @@ class CPGNode(Node):
             msg.data), ifc.latched_qos()))
         self.teaching = self.driver.teacher is not None
         if self.teaching:
-            # in the hot path: a teacher at 10 x real time sends 1000 samples per wall s
-            subs.append(self.create_subscription(JointState, ifc.CPG_TEACH, self._on_teach, 1000))
+            # in the hot path: a teacher at 10 x real time sends 1000 samples per wall s; TEACH_DEPTH of them
+            # wait while the node is busy (a sample lost is a gap in the teacher's time)
+            subs.append(self.create_subscription(JointState, ifc.CPG_TEACH, self._on_teach, TEACH_DEPTH))
             self.create_service(Trigger, "~/take_over", self._on_take_over)
             self.create_service(Trigger, "~/save_taught", self._on_save_taught)
             self.teach_pub = self.create_publisher(Float64MultiArray, ifc.CPG_TEACH_STATE, ifc.DEPTH)
