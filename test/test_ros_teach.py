@@ -57,12 +57,12 @@ def test_a_graph_refuses_a_drifting_stream_then_learns_the_slow_walk_and_walks_i
         env=isolated_env(domain), stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     try:
         bad = teach_graph(tmp_path / "drift", Drift(), rate=RATE, domain_id=domain, attach=True,
-                          wall_limit_s=START_S, progress=lambda s: None, after_s=8.0)
+                          wall_limit_s=START_S, progress=lambda s: None, after_s=3.0)
         assert not bad["converged"] and "not periodic" in bad["reason"], bad
         assert bad["state"] == "refused" and not bad["took_over"] and not bad["fell"]
-        after = bad["after"]  # the walk goes on with its network (past the CPG's takeover at 6.6 s)
-        assert after["walked_s"] >= 8.0 and after["distance_m"] > 0.2, after  # ~0.6 m per 8 s
-        assert after["cpg_state"] == "walking" and after["took_over"] == "0"
+        after = bad["after"]  # the walk goes on with its network (the recording's steps, then the CPG's)
+        assert after["walked_s"] >= 3.0 and after["distance_m"] > 0.05, after  # ~0.25 m per 3 s
+        assert after["cpg_state"] in ("starting", "walking") and after["took_over"] == "0"
         time.sleep(live_teaching_config().stall_s + 0.5)  # a pause: the next stream starts a new teaching
         stream = StreamTeacher("slow", 1.0)
         res = teach_graph(tmp_path / "slow", stream, rate=RATE, take_over=True, save=tmp_path / "slow.yaml",
