@@ -2,8 +2,9 @@
 
 - ``OK`` (0): the command did what was asked;
 - ``FELL`` (1): the robot fell in a run whose purpose is to walk (walk, cpg-walk, demo, replay, graph,
-  soak, faults, drive-check, two-hosts); the fall — sim time and where — is the last line printed;
-- ``BAD_INPUT`` (2): bad input, one line naming it (raised as ``UserError``, printed by cli/main.py).
+  soak, faults, drive-check, two-hosts, teach); the fall — sim time and where — is the last line printed;
+- ``BAD_INPUT`` (2): bad input, one line naming it (raised as ``UserError``, printed by cli/main.py; a
+  teaching stream cpg_node refused, with its reason).
 
 Experiments whose falls are data (sweep, envelope, feedback-search, transport, margins, cmd-vel-map) exit
 ``OK`` and count the falls in their summary.

@@ -78,7 +78,7 @@ def _teach(args: argparse.Namespace) -> int:
                   "the refusal")
         if res["fell"]:
             return report_fall("teach", [fall_line("teach", res.get("fell_at_s"), what="after the refusal")])
-        print(f"cpg-walker teach: not taught: {res.get('reason')}", file=sys.stderr)
+        print(f"cpg-walker teach: error: not taught: {res.get('reason')}", file=sys.stderr)
         return BAD_INPUT
     line = (f"taught: {res['learned_frequency_hz']:.4f} Hz learned after {res['converged_after_s']:.1f} "
             f"teacher s")
