@@ -23,7 +23,7 @@ def command_modules() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(package.__path__) if m.name not in _NOT_COMMANDS)
 
 
-_NOT_COMMANDS = {"main", "outcome", "progress", "checks"}
+_NOT_COMMANDS = {"main", "outcome", "progress", "checks", "study_args"}
 
 #: The old name of the input-error exception (cpg_walker.errors.InputError).
 UserError = InputError

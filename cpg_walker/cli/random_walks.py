@@ -9,7 +9,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cpg_walker.cli.checks import count, out_dir, positive
+from cpg_walker.cli.checks import out_dir, positive
+from cpg_walker.cli.study_args import add_study_args, check_study_args
 
 
 def seed_range(text: str) -> list[int]:
@@ -40,21 +41,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pathways", default=None, metavar="P,P,...",
                    help="these feedback pathways instead of --feedback's (e.g. amplitude,reset_both,heading: "
                         "the default ones without the ankle strategy)")
-    p.add_argument("--jobs", type=count, default=None, metavar="N",
-                   help="parallel walks (default: every core)")
+    add_study_args(p, "random-walks")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
     from cpg_walker.experiments.random_commands import run_random_walks
 
+    check_study_args(args)
     pathways = None
     if args.pathways is not None:
         from cpg_walker.walker.feedback import check_pathways
 
         pathways = check_pathways(tuple(p.strip() for p in args.pathways.split(",") if p.strip()))
     r = run_random_walks(args.seeds, args.out, args.duration, args.feedback, args.jobs,
-                         command=" ".join(["cpg-walker", *sys.argv[1:]]), pathways=pathways)
+                         command=" ".join(["cpg-walker", *sys.argv[1:]]), pathways=pathways,
+                         storage=args.storage, study=args.study, resume=args.resume)
     fell = [run for run in r["runs"] if run["fell"]]
     print(f"{len(r['runs'])} random walks of {args.duration:g} s: {len(fell)} fell", file=sys.stderr)
     if fell:

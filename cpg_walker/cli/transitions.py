@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 
 from cpg_walker.cli.checks import count, out_dir
+from cpg_walker.cli.study_args import add_study_args, check_study_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -16,8 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=out_dir, help="output directory")
     p.add_argument("--phases", type=count, default=None, metavar="N",
                    help="stride phases per change (default: config/sweep.yaml's transitions.phases)")
-    p.add_argument("--jobs", type=count, default=None, metavar="N",
-                   help="parallel walks (default: every core)")
+    add_study_args(p, "transitions")
     p.set_defaults(func=_run)
 
 
@@ -27,9 +27,11 @@ def _run(args: argparse.Namespace) -> int:
     from cpg_walker.experiments.sweep import load_config
     from cpg_walker.experiments.transitions import from_config, run_transitions
 
+    check_study_args(args)
     states, phases, times = from_config(load_config()["transitions"])
     r = run_transitions(args.out, states, args.phases or phases, args.jobs, times,
-                        command=" ".join(["cpg-walker", *sys.argv[1:]]))
+                        command=" ".join(["cpg-walker", *sys.argv[1:]]), storage=args.storage,
+                        study=args.study, resume=args.resume)
     for run in r["runs"]:
         if run["fell"]:
             print(f"fell: {run['from']} -> {run['to']} at phase {run['phase']} ({run['at_s']} s): "

@@ -36,12 +36,12 @@ import numpy as np
 
 from cpg_walker.errors import InputError
 from cpg_walker.experiments.config_file import Config, deep_merge
+from cpg_walker.experiments.study import Engine, EngineSettings, study_options, task
 from cpg_walker.experiments.walk_runs import (
     CELL_LEGEND,
     Push,
     WalkSpec,
     result_cell,
-    run_many,
     run_walk,
     start_time,
 )
@@ -148,6 +148,41 @@ def _eval(spec: WalkSpec) -> dict:
         return {"error": str(exc)}
 
 
+def _scenario(s: dict, overrides: dict | None, item: dict) -> dict:
+    m = _eval(scenario_spec(s, tuple(item["pathways"]), overrides, item["transition"]))
+    return {**_brief(m), "cost": round(scenario_cost(m, item["v1"], item["objective"]), 4)}
+
+
+def _candidate_attrs(item: dict, result: dict) -> dict:
+    per = result["scenarios"]
+    return {"generation": item["generation"], "candidate": item["candidate"],
+            "falls": sum(bool(m.get("fell")) for m in per.values()),
+            **{f"cost {name}": m["cost"] for name, m in per.items()}}
+
+
+def _candidate_params(item: dict) -> dict[str, tuple[float, float, float]]:
+    return {n: (v, *item["fields"][n]) for n, v in item["params"].items()}
+
+
+@task(value=lambda r: r["objective"], attrs=_candidate_attrs, params=_candidate_params)
+def evaluate_candidate(item: dict) -> dict:
+    """One candidate of the search (a study task): its gains ``item["params"]`` walked on every searched
+    scenario in turn; {"scenarios": {name: metrics + cost}, "objective": the sum} (the trial's value)."""
+    per = {s["name"]: _scenario(s, item["params"], item) for s in item["scenarios"]}
+    return {"scenarios": per, "objective": round(sum(p["cost"] for p in per.values()), 4)}
+
+
+def _holdout_attrs(item: dict, result: dict) -> dict:
+    return {"gains": item["gains"], "scenario": item["scenario"]["name"], "fell": result.get("fell")}
+
+
+@task(value=lambda r: r["cost"], attrs=_holdout_attrs)
+def holdout_walk(item: dict) -> dict:
+    """One walk of the held-out judgement (a study task): gains ``item["gains"]`` (off: open loop) on one
+    scenario; its metrics and cost."""
+    return _scenario(item["scenario"], item["overrides"], item)
+
+
 class Space:
     """The searched fields and their [low, high]: to and from the normalised [0, 1] coordinates."""
 
@@ -169,40 +204,44 @@ def _pathways(cfg: dict) -> tuple[str, ...]:
     return default_pathways() if cfg["pathways"] == "default" else tuple(cfg["pathways"])
 
 
-def _reference_speed(out: Path, cfg: dict, jobs: int | None) -> float:
-    """v₁ (m/s): the open-loop reference walk's speed, measured once and kept in DIR/reference.json."""
+def _reference_speed(out: Path, cfg: dict, engine: Engine | None = None) -> float:
+    """v₁ (m/s): the open-loop reference walk's speed, measured once per search and kept in the study
+    (``v1_mps``) and DIR/reference.json."""
     f = out / "reference.json"
-    if f.is_file():
-        return float(json.loads(f.read_text())["v1_mps"])
-    ref = {"name": "reference", **cfg["reference"]}
-    m = run_walk(scenario_spec(ref, (), None, cfg["transition"]))
-    if m["fell"] or m["steady_speed_mps"] <= 0:
-        raise RuntimeError(f"the reference walk {cfg['reference']} fell or did not move forward: {_brief(m)}")
-    f.write_text(json.dumps({"v1_mps": m["steady_speed_mps"], "walk": _brief(m)}, indent=1) + "\n")
-    return float(m["steady_speed_mps"])
+    known = engine.study.user_attrs.get("v1_mps") if engine is not None else None
+    if known is None and f.is_file():
+        known = json.loads(f.read_text())["v1_mps"]
+    if known is not None:
+        v1 = float(known)
+    else:
+        ref = {"name": "reference", **cfg["reference"]}
+        m = run_walk(scenario_spec(ref, (), None, cfg["transition"]))
+        if m["fell"] or m["steady_speed_mps"] <= 0:
+            raise RuntimeError(f"the reference walk {cfg['reference']} fell or did not move forward: "
+                               f"{_brief(m)}")
+        v1 = float(m["steady_speed_mps"])
+        f.write_text(json.dumps({"v1_mps": v1, "walk": _brief(m)}, indent=1) + "\n")
+    if engine is not None:
+        engine.study.set_user_attr("v1_mps", v1)
+    return v1
 
 
-def evaluate(candidates: list[dict], scenarios: list[dict], cfg: dict, v1: float, jobs: int | None,
-             progress=None) -> list[dict]:
-    """Walk every candidate (FeedbackConfig overrides; None = open loop) on every scenario in parallel;
-    per candidate: {"scenarios": {name: metrics + cost}, "objective": sum}."""
-    paths = _pathways(cfg)
-    specs = [scenario_spec(s, paths, c, cfg["transition"]) for c in candidates for s in scenarios]
-    res = run_many(_eval, specs, jobs, progress)
-    out = []
-    for k in range(len(candidates)):
-        per = {}
-        for j, s in enumerate(scenarios):
-            m = res[k * len(scenarios) + j]
-            per[s["name"]] = {**_brief(m), "cost": round(scenario_cost(m, v1, cfg["objective"]), 4)}
-        out.append({"scenarios": per, "objective": round(sum(p["cost"] for p in per.values()), 4)})
-    return out
+def _task_setup(cfg: dict, v1: float) -> dict:
+    return {"pathways": list(_pathways(cfg)), "transition": cfg["transition"], "objective": cfg["objective"],
+            "v1": v1}
 
 
 def search(out_dir: str | Path, generations: int | None = None, popsize: int | None = None, seed: int = 1,
            jobs: int | None = None, resume: bool = False, quick: bool = False, config: str | None = None,
-           log=print) -> dict:
-    """Run (or continue, ``resume``) the CMA-ES search up to ``generations``; returns the best so far."""
+           log=print, storage: str | None = None, study: str | None = None,
+           settings: EngineSettings | None = None) -> dict:
+    """Run (or continue, ``resume``) the CMA-ES search up to ``generations`` as the study ``study`` (default
+    "feedback-search") in ``storage`` (default DIR/study.db); returns the best so far.
+
+    This call coordinates: it asks ``cma`` for each generation and enqueues the candidates; workers run
+    them (``evaluate_candidate``). A resumed search asks again from the same seed and reads the
+    generations already in the study back instead of walking them, so it continues exactly where it
+    stopped, whichever workers ran what."""
     import cma
 
     from cpg_walker.progress import Progress
@@ -214,52 +253,42 @@ def search(out_dir: str | Path, generations: int | None = None, popsize: int | N
         raise InputError(f"--generations must be >= 1 and --popsize >= 2, got {gens}, {pop}")
     out = Path(out_dir)
     space = Space(cfg["fields"])
-    state_file, trials = out / "state.pkl", out / "trials.jsonl"
     setup = {"fields": cfg["fields"], "pathways": list(_pathways(cfg)), "popsize": pop, "seed": seed,
              "scenarios": cfg["scenarios"], "objective": cfg["objective"]}
-    if resume:
-        if not state_file.is_file():
-            raise InputError(f"--resume: no saved search in {out} (state.pkl)")
-        st = pickle.loads(state_file.read_bytes())
-        if st["setup"] != setup:
-            diff = sorted(k for k in setup if st["setup"].get(k) != setup[k])
-            raise InputError(f"--resume: the saved search in {out} differs in {diff}; use another --out")
-        es, gen, best = st["es"], st["generation"], st["best"]
-        np.random.set_state(st["np_random"])
-        if trials.is_file():  # drop a generation that was cut short
-            keep = [ln for ln in trials.read_text().splitlines() if ln and json.loads(ln)["generation"] < gen]
-            trials.write_text("".join(x + "\n" for x in keep))
-        log(f"feedback-search: resuming after generation {gen} (best objective {best['objective']})")
-    else:
-        if state_file.exists() or trials.exists():
-            raise InputError(f"{out} already holds a search; pass --resume to continue it, or another --out")
-        out.mkdir(parents=True, exist_ok=True)
+    url, name = study_options(storage, study, out, "feedback-search")
+    with Engine(url, name, "feedback-search", jobs, settings, attrs={"setup": setup},
+                resume=resume) as engine:
+        v1 = _reference_speed(out, cfg, engine)
+        (out / "setup.json").write_text(json.dumps(setup, indent=1) + "\n")
         x0 = np.clip(space.normalise(asdict(FeedbackConfig.load())), 0.05, 0.95)
         es = cma.CMAEvolutionStrategy(x0.tolist(), float(cfg["cma"]["sigma0"]),
                                       {"seed": seed, "popsize": pop, "bounds": [0.0, 1.0], "verbose": -9})
-        gen, best = 0, {"objective": math.inf}
-        (out / "setup.json").write_text(json.dumps(setup, indent=1) + "\n")
-    v1 = _reference_speed(out, cfg, jobs)
-    while gen < gens:
-        us = es.ask()
-        cands = [space.values(np.asarray(u)) for u in us]
-        progress = Progress(len(cands) * len(cfg["scenarios"]), f"generation {gen + 1}/{gens}", unit="walks")
-        res = evaluate(cands, cfg["scenarios"], cfg, v1, jobs, progress)
-        progress.close()
-        es.tell(us, [r["objective"] for r in res])
-        with trials.open("a") as fh:
+        best: dict = {"objective": math.inf}
+        lines = []
+        base = {**_task_setup(cfg, v1), "fields": cfg["fields"], "scenarios": cfg["scenarios"]}
+        for gen in range(gens):
+            us = es.ask()
+            cands = [space.values(np.asarray(u)) for u in us]
+            items = [{**base, "params": c, "generation": gen, "candidate": k} for k, c in enumerate(cands)]
+            progress = Progress(len(items), f"generation {gen + 1}/{gens}", unit="candidates")
+            res = engine.map(evaluate_candidate, items, f"generation {gen}", progress)
+            progress.close()
+            bad = [r["error"] for r in res if "error" in r and "objective" not in r]
+            if bad:
+                raise RuntimeError(f"generation {gen}: a candidate could not be evaluated: {bad[0]}")
+            es.tell(us, [r["objective"] for r in res])
             for k, (c, r) in enumerate(zip(cands, res, strict=True)):
-                fh.write(json.dumps({"generation": gen, "candidate": k, "params": c, **r}) + "\n")
+                lines.append(json.dumps({"generation": gen, "candidate": k, "params": c, **r}))
                 if r["objective"] < best["objective"]:
                     best = {"objective": r["objective"], "generation": gen, "candidate": k, "params": c,
                             "scenarios": r["scenarios"]}
-        gen += 1
-        state_file.write_bytes(pickle.dumps({"setup": setup, "es": es, "generation": gen, "best": best,
-                                             "np_random": np.random.get_state()}))
-        write_best(out / "best.yaml", best, setup)
-        objs = sorted(r["objective"] for r in res)
-        log(f"generation {gen}/{gens}: objective best {objs[0]:.2f}, median {objs[len(objs) // 2]:.2f}; "
-            f"best so far {best['objective']:.2f} (v1 = {v1:.4f} m/s)")
+            (out / "trials.jsonl").write_text("".join(x + "\n" for x in lines))
+            (out / "state.pkl").write_bytes(pickle.dumps({"setup": setup, "es": es, "generation": gen + 1,
+                                                          "best": best, "np_random": np.random.get_state()}))
+            write_best(out / "best.yaml", best, setup)
+            objs = sorted(r["objective"] for r in res)
+            log(f"generation {gen + 1}/{gens}: objective best {objs[0]:.2f}, median "
+                f"{objs[len(objs) // 2]:.2f}; best so far {best['objective']:.2f} (v1 = {v1:.4f} m/s)")
     return best
 
 
@@ -284,31 +313,44 @@ def read_best(path: Path) -> dict:
 
 
 def holdout(out_dir: str | Path, jobs: int | None = None, quick: bool = False, config: str | None = None,
-            best_file: str | None = None) -> dict:
+            best_file: str | None = None, storage: str | None = None, study: str | None = None) -> dict:
     """Walk the best gains (DIR/best.yaml), config/feedback.yaml's defaults and the open loop on the
-    searched and the held-out scenarios; DIR/holdout.json and holdout.md, side by side."""
+    searched and the held-out scenarios, as a batch of the search's study; DIR/holdout.json and
+    holdout.md, side by side."""
+    import hashlib
+
     from cpg_walker.progress import Progress
 
     cfg = load_config(config, quick)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     best = read_best(Path(best_file) if best_file else out / "best.yaml")
-    v1 = _reference_speed(out, cfg, jobs)
     scen = [*cfg["scenarios"], *cfg["holdout"]]
     cands = {"off": None, "default": {}, "best": best}
-    progress = Progress(len(cands) * len(scen), "holdout", unit="walks")
-    res = evaluate(list(cands.values()), scen, cfg, v1, jobs, progress)
-    progress.close()
+    url, name = study_options(storage, study, out, "feedback-search")
+    with Engine(url, name, "feedback-search", jobs, resume=True) as engine:
+        v1 = _reference_speed(out, cfg, engine)
+        base = _task_setup(cfg, v1)
+        items = [{**base, "gains": g, "overrides": c, "scenario": s} for g, c in cands.items() for s in scen]
+        tag = hashlib.blake2b(json.dumps(items, sort_keys=True).encode(), digest_size=4).hexdigest()
+        progress = Progress(len(items), "holdout", unit="walks")
+        flat = engine.map(holdout_walk, items, f"holdout {tag}", progress)
+        progress.close()
+    bad = [r["error"] for r in flat if "error" in r and "cost" not in r]
+    if bad:
+        raise RuntimeError(f"holdout: a walk could not be evaluated: {bad[0]}")
+    res = [{"scenarios": {s["name"]: flat[i * len(scen) + j] for j, s in enumerate(scen)}}
+           for i in range(len(cands))]
     searched = {s["name"] for s in cfg["scenarios"]}
     report = {"v1_mps": v1, "best": best, "pathways": list(_pathways(cfg)), "rows": []}
     for s in scen:
         row = {"scenario": s["name"], "set": "searched" if s["name"] in searched else "held-out", "spec": s}
-        for name, r in zip(cands, res, strict=True):
-            row[name] = r["scenarios"][s["name"]]
+        for cname, r in zip(cands, res, strict=True):
+            row[cname] = r["scenarios"][s["name"]]
         report["rows"].append(row)
-    for name, r in zip(cands, res, strict=True):
+    for cname, r in zip(cands, res, strict=True):
         costs = {s["name"]: r["scenarios"][s["name"]]["cost"] for s in scen}
-        report[f"objective_{name}"] = {
+        report[f"objective_{cname}"] = {
             "searched": round(sum(v for k, v in costs.items() if k in searched), 3),
             "held-out": round(sum(v for k, v in costs.items() if k not in searched), 3)}
     (out / "holdout.json").write_text(json.dumps(report, indent=1) + "\n")

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cpg_walker.experiments.walk_runs import WalkSpec, run_many, run_walk
+from cpg_walker.experiments.study import Engine, study_options, task
+from cpg_walker.experiments.walk_runs import WalkSpec, run_walk
 from cpg_walker.walker.governor import GovernorConfig, command_range
 
 #: Sim s between commands, and the first command's time (the CPG drives alone from ≈ 6.6 s).
@@ -44,7 +45,10 @@ def spec(seed: int, duration_s: float = 120.0, feedback: str = "ours",
                     pathways=pathways, label=f"seed {seed}", governed=True)
 
 
-def _one(s: WalkSpec) -> dict:
+@task(value=lambda r: float(r["distance_m"] or 0.0),
+      attrs=lambda s, r: {"label": s.label, "fell": r["fell"], "fall_time_s": r["fall_time_s"]})
+def random_walk(s: WalkSpec) -> dict:
+    """One seed's sequence (a study task; value: the distance walked, m)."""
     r = run_walk(s)
     return {"label": s.label, "feedback": s.variant, "schedule": [list(x) for x in s.schedule],
             "fell": r["fell"], "fall_time_s": r["fall_time_s"], "distance_m": r.get("distance_m")}
@@ -52,11 +56,16 @@ def _one(s: WalkSpec) -> dict:
 
 def run_random_walks(seeds: list[int], out_dir: str | Path, duration_s: float = 120.0, feedback: str = "ours",
                      jobs: int | None = None, command: str = "cpg-walker random-walks",
-                     pathways: tuple[str, ...] | None = None) -> dict:
-    """Walk every seed's sequence; DIR/random_walks.json. ``falls``: how many fell."""
+                     pathways: tuple[str, ...] | None = None, storage: str | None = None,
+                     study: str | None = None, resume: bool = False) -> dict:
+    """Walk every seed's sequence as the study ``study`` (default "random-walks") in ``storage`` (default
+    DIR/study.db); DIR/random_walks.json. ``falls``: how many fell."""
     from cpg_walker.experiments.provenance import provenance
 
-    runs = run_many(_one, [spec(s, duration_s, feedback, pathways) for s in seeds], jobs=jobs)
+    url, name = study_options(storage, study, out_dir, "random-walks")
+    with Engine(url, name, "random-walks", jobs, resume=resume,
+                replace=storage is None and not resume) as eng:
+        runs = eng.map(random_walk, [spec(s, duration_s, feedback, pathways) for s in seeds], "random-walks")
     report = {"seeds": list(seeds), "duration_s": duration_s, "feedback": feedback,
               "pathways": None if pathways is None else list(pathways),
               "falls": sum(1 for r in runs if r["fell"]), "runs": runs, **provenance(command)}

@@ -24,12 +24,13 @@ from pathlib import Path
 
 from cpg_walker.errors import InputError
 from cpg_walker.experiments.config_file import Config, deep_merge
+from cpg_walker.experiments.study import Engine, EngineSettings, study_options, task
 from cpg_walker.experiments.walk_runs import (
     CELL_LEGEND,
     Push,
     WalkSpec,
+    _safe,
     result_cell,
-    run_many,
     run_walk,
     start_time,
     variant,
@@ -135,14 +136,35 @@ def push_bisection(task: dict) -> dict:
             "resolution_Ns": round(hi - lo, 4), "tried": tried}
 
 
-def _task(item: tuple[str, object]):
+def _task_value(result: dict) -> float:
+    """A sweep trial's value: the push recovered (N s), or the distance walked (m)."""
+    if "max_recovered_impulse_Ns" in result:
+        return float(result["max_recovered_impulse_Ns"])
+    return float(result.get("distance_m") or 0.0)
+
+
+def _task_attrs(item: tuple[str, object], result: dict) -> dict:
     kind, x = item
-    return push_bisection(x) if kind == "push" else run_walk(x)
+    if kind == "push":
+        return {"kind": "push", "variant": x["variant"], "direction": x["direction"], "zeta": x["zeta"]}
+    return {"kind": x.label or "walk", "zeta": x.zeta, "alpha": x.alpha, "variant": x.variant,
+            "start": x.start, "fell": result.get("fell"), "error": result.get("error")}
+
+
+@task(value=_task_value, attrs=_task_attrs)
+def sweep_task(item: tuple[str, object]) -> dict:
+    """One task of the sweep's study: ("push", bisection task) or ("walk", WalkSpec)."""
+    kind, x = item
+    return push_bisection(x) if kind == "push" else _safe(run_walk, x)
 
 
 def run_sweep(out_dir: str | Path, quick: bool = False, jobs: int | None = None, config: str | None = None,
-              duration_after_s: float | None = None, progress_enabled: bool = True) -> dict:
-    """Run everything of config/sweep.yaml and write DIR/sweep.json, sweep.md and the PNGs."""
+              duration_after_s: float | None = None, progress_enabled: bool = True,
+              storage: str | None = None, study: str | None = None, resume: bool = False,
+              settings: EngineSettings | None = None) -> dict:
+    """Run everything of config/sweep.yaml as the study ``study`` (default "sweep") in ``storage`` (default
+    DIR/study.db, made afresh unless ``resume``; ``settings``: its engine's, default config/study.yaml) and
+    write DIR/sweep.json, sweep.md and the PNGs."""
     from cpg_walker.progress import Progress
 
     cfg = load_config(config, quick)
@@ -158,9 +180,25 @@ def run_sweep(out_dir: str | Path, quick: bool = False, jobs: int | None = None,
               for v in p["variants"] for d in p["directions"]]
     grid, alphas, fig8 = grid_specs(cfg), alpha_specs(cfg), fig8_specs(cfg)
     items = [("push", t) for t in pushes] + [("walk", s) for s in [*grid, *alphas, *fig8]]
-    progress = Progress(len(items), "sweep", unit="tasks", enabled=progress_enabled)
-    res = run_many(_task, items, jobs, progress)
-    progress.close()
+    url, name = study_options(storage, study, out, "sweep")
+    with Engine(url, name, "sweep", jobs, settings, direction="maximize", attrs={"config": cfg},
+                resume=resume, replace=storage is None and not resume) as engine:
+        progress = Progress(len(items), "sweep", unit="tasks", enabled=progress_enabled)
+        res = engine.map(sweep_task, items, "sweep", progress)
+        progress.close()
+        report = _report(out, cfg, quick, pushes, grid, alphas, fig8, res)
+        from cpg_walker.experiments.transitions import from_config, run_transitions
+
+        states, phases, times = from_config(cfg["transitions"])
+        tr = run_transitions(out, states, phases, jobs, times, engine=engine)
+    report["transitions"] = {"falls": tr["falls"], "runs": len(tr["runs"])}
+    report["pngs"].append(str(out / "transitions.png"))
+    return report
+
+
+def _report(out: Path, cfg: dict, quick: bool, pushes: list, grid: list, alphas: list, fig8: list,
+            res: list) -> dict:
+    """sweep.json, sweep.md and the PNGs of the tasks' results (in the order they were enqueued)."""
     n = len(pushes)
     push_res, grid_res = res[:n], res[n : n + len(grid)]
     alpha_res, fig8_res = res[n + len(grid) : n + len(grid) + len(alphas)], res[n + len(grid) + len(alphas):]
@@ -188,12 +226,6 @@ def run_sweep(out_dir: str | Path, quick: bool = False, jobs: int | None = None,
                       str(plot_alpha(report, out / "alpha.png")),
                       str(plot_fig8(report, out / "fig8.png"))]
     (out / "sweep.md").write_text(markdown(report))
-    from cpg_walker.experiments.transitions import from_config, run_transitions
-
-    states, phases, times = from_config(cfg["transitions"])
-    tr = run_transitions(out, states, phases, jobs, times)
-    report["transitions"] = {"falls": tr["falls"], "runs": len(tr["runs"])}
-    report["pngs"].append(str(out / "transitions.png"))
     return report
 
 

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cpg_walker.experiments.walk_runs import WalkSpec, run_many, run_walk
+from cpg_walker.experiments.study import Engine, study_options, task
+from cpg_walker.experiments.walk_runs import WalkSpec, run_walk
 
 #: The states of the map: slow, the learned walk, fast, backward, fast backward, standing.
 STATES: tuple[tuple[float, float], ...] = ((0.4, 0.5), (1.0, 1.0), (1.5, 1.0), (-1.0, 1.0), (-1.5, 1.0),
@@ -40,7 +41,14 @@ def specs(states=STATES, phases: int = 4, period_s: float = 1.0,
     return out
 
 
-def _run(item: tuple[dict, WalkSpec]) -> dict:
+def _attrs(item: tuple[dict, WalkSpec], result: dict) -> dict:
+    key, _ = item
+    return {"from": key["from"], "to": key["to"], "phase": key["phase"], "fell": result["fell"]}
+
+
+@task(value=lambda r: 0.0 if r["fell"] else 1.0, attrs=_attrs)
+def transition_walk(item: tuple[dict, WalkSpec]) -> dict:
+    """One change of the map (a study task; value 1 when it walked on, 0 when it fell)."""
     key, spec = item
     r = run_walk(spec)
     return {**key, "fell": bool(r.get("fell", True)), "fall_time_s": r.get("fall_time_s"),
@@ -54,15 +62,26 @@ def from_config(t: dict) -> tuple[tuple[tuple[float, float], ...], int, tuple[fl
 
 
 def run_transitions(out_dir: str | Path, states=STATES, phases: int = 4, jobs: int | None = None,
-                    times: tuple[float, float, float] = (FROM_S, TO_S, AFTER_S), command: str = "") -> dict:
-    """Walk the map; write DIR/transitions.json and transitions.png; return the report (``command``: the
-    command line, recorded with the provenance)."""
+                    times: tuple[float, float, float] = (FROM_S, TO_S, AFTER_S), command: str = "",
+                    engine: Engine | None = None, storage: str | None = None, study: str | None = None,
+                    resume: bool = False) -> dict:
+    """Walk the map, as the batch "transitions" of ``engine``'s study (or of the study ``study``, default
+    "transitions", in ``storage``, default DIR/study.db); write DIR/transitions.json and transitions.png;
+    return the report (``command``: the command line, recorded with the provenance)."""
     from cpg_walker.experiments.provenance import provenance
     from cpg_walker.experiments.walk_runs import _controller
 
     prov = provenance(command) if command else None
     period = _controller().period
-    runs = run_many(_run, specs(states, phases, period, times), jobs=jobs)
+    items = specs(states, phases, period, times)
+    if engine is None:
+        url, name = study_options(storage, study, out_dir, "transitions")
+        attrs = {"states": [list(s) for s in states], "phases": phases, "times": list(times)}
+        with Engine(url, name, "transitions", jobs, resume=resume, replace=storage is None and not resume,
+                    attrs=attrs) as eng:
+            runs = eng.map(transition_walk, items, "transitions")
+    else:
+        runs = engine.map(transition_walk, items, "transitions")
     n = len(states)
     matrix = np.full((n, n), np.nan)
     for i, s1 in enumerate(states):
