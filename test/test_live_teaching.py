@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from cpg_walker.errors import InputError
+from cpg_walker.robot.gait_data import Gait, load_gait
 from cpg_walker.walker.controller import DOFS
 from cpg_walker.walker.learning import learning_settings, live_teaching_config
 from cpg_walker.walker.live_teaching import (
@@ -18,6 +19,7 @@ from cpg_walker.walker.live_teaching import (
     CONVERGED,
     LEARNING,
     REFUSED,
+    SEARCH_EVERY_S,
     LiveTeacher,
     LiveTeachingConfig,
 )
@@ -114,6 +116,33 @@ def test_a_non_periodic_stream_is_refused_and_a_new_stream_starts_after_a_pause(
     t = end + cfg.stall_s + 1.0  # after a pause: a new teaching
     teacher.add(t, DOFS, list(wander(t)), now=t)
     assert teacher.state == COLLECTING and teacher.teachings == 2
+
+
+def test_a_drifting_recording_is_streamed_whole_and_refused_as_not_periodic():
+    """A recording that drifts (a random walk of every joint, 20 s) has no stride by live teaching's rule
+    (past the first lag correlating below PERIOD_DIP, at least min_correlation): the stream is all of it
+    over and over, refused within give_up_s. Without the dip its legs correlate 0.93 at 0.5 s: offline
+    learning's rule (correlation 0.8) cut a 0.36 s "stride" from it, looped into a periodic stream the
+    learner learned (`teach --csv` of such a drift: refused only after 600 strides). The packaged walks
+    keep their strides."""
+    walk = load_gait("walk")
+    rng = np.random.default_rng(4)
+    n = 20001  # 20 s at the walk's 1 ms
+    q = walk.q[0] + np.cumsum(rng.normal(0.0, 0.002, size=(n, len(walk.names))), axis=0)
+    drift = Gait("drift", walk.names, np.arange(n) * 0.001, q, "drift")
+    stream = TeachingStream(drift)
+    assert not stream.periodic and "at least 0.9 needed" in stream.why_not_periodic, stream.why_not_periodic
+    assert (stream.cycle_start, stream.cycle_period) == (0.0, drift.duration)
+    assert np.array_equal(stream.at(drift.duration + 5.0), stream.gait.at(5.0))  # the whole of it again
+    for name, start, period in (("walk", 5.616, 2.513), ("slow", 6.284, 2.56)):
+        kept = TeachingStream(name)
+        assert kept.periodic
+        assert (kept.cycle_start, kept.cycle_period) == pytest.approx((start, period), abs=1e-9)
+    teacher = _teacher()
+    end = _feed(teacher, stream.at, until=120.0)
+    cfg = teacher.cfg
+    assert teacher.state == REFUSED and "not periodic" in teacher.reason, (teacher.state, teacher.reason)
+    assert end <= cfg.give_up_s + SEARCH_EVERY_S + SAMPLE_DT and teacher.result is None
 
 
 @pytest.mark.parametrize("bad, reason", [

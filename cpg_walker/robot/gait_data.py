@@ -194,17 +194,25 @@ class Cycle:
         return self.start + self.period
 
 
-def estimate_period(gait: Gait, settle: float | None = None, lo: float = 1.5, hi: float = 4.0) -> float:
+def estimate_period(gait: Gait, settle: float | None = None, lo: float = 1.5, hi: float = 4.0,
+                   dip: float | None = None, min_correlation: float = 0.8) -> float:
     """Stride period (s) from the normalised autocorrelation of the leg joints after ``settle`` seconds
-    (default: the second half of the recording's first 60 %), searched in [lo, hi]."""
+    (default: the second half of the recording's first 60 %), searched in [lo, hi]; it must correlate at
+    least ``min_correlation``. ``dip`` (``autocorrelation_period``'s): only lags past the first one that
+    correlates below it count, so a slow drift, which correlates well at every short lag, has no period
+    (live teaching's rule; offline learning leaves it off)."""
     legs = [gait.names.index(j) for j in LEG_JOINTS if j in gait.names]
     if not legs:
         raise InputError(f"{gait.source}: no leg joints in the recording; cannot find a gait cycle")
     start = int((settle if settle is not None else 0.25 * gait.duration) / gait.dt)
-    period, best = autocorrelation_period(gait.q[start:, legs], gait.dt, lo, hi, keep_s=1.0)
-    if period is None or best < 0.8:
+    period, best = autocorrelation_period(gait.q[start:, legs], gait.dt, lo, hi, keep_s=1.0, dip=dip)
+    if period is None and np.isnan(best):
+        raise InputError(f"{gait.source}: no periodic gait found between {lo} and {hi} s (it drifts: its "
+                         f"autocorrelation never falls below {dip:g})")
+    if period is None or best < min_correlation:
         raise InputError(
-            f"{gait.source}: no periodic gait found between {lo} and {hi} s (best correlation {best:.2f})"
+            f"{gait.source}: no periodic gait found between {lo} and {hi} s (best correlation {best:.2f}, "
+            f"at least {min_correlation:g} needed)"
         )
     return period
 
@@ -254,29 +262,33 @@ def autocorrelation_period(q: np.ndarray, dt: float, lo: float, hi: float, keep_
 
 
 def find_steady_cycle(gait: Gait, tail: float = 0.8, spread: float = 0.15, window: float = 0.03,
-                      lo: float = 1.5, hi: float = 4.0) -> Cycle:
+                      lo: float = 1.5, hi: float = 4.0, dip: float | None = None,
+                      min_correlation: float = 0.8) -> Cycle:
     """The last full stride of the recording, with its seam where the signal matches best (cached by
     the recording's content and the arguments: the search takes about a second).
 
     The cycle ends at some ``e`` in the last ``tail`` seconds and starts at ``e - T`` with ``T`` within
-    ``spread`` of the autocorrelation period (searched in [``lo``, ``hi``] s); ``(start, T)`` minimise the
-    squared mismatch of the leg angles (and of their velocities, weighted by 0.05 s) over a ``window``
-    around the seam, so repeating
-    ``[start, start + T)`` after the recording continues it without a jump."""
+    ``spread`` of the autocorrelation period (``estimate_period``: searched in [``lo``, ``hi``] s, past the
+    first lag correlating below ``dip`` if given, at least ``min_correlation``); ``(start, T)`` minimise
+    the squared mismatch of the leg angles (and of their velocities, weighted by 0.05 s) over a ``window``
+    around the seam, so repeating ``[start, start + T)`` after the recording continues it without a jump.
+    A recording without such a period raises InputError (not cached)."""
     digest = hashlib.blake2b(digest_size=16)
     head = repr((gait.names, gait.t.shape, gait.t.dtype.str, gait.q.shape, gait.q.dtype.str)).encode()
     for part in (head, gait.t, gait.q):
         digest.update(np.ascontiguousarray(part).data if isinstance(part, np.ndarray) else part)
-    key = (digest.hexdigest(), float(tail), float(spread), float(window), float(lo), float(hi))
-    return _cached(_CYCLES, key, lambda: _search_steady_cycle(gait, tail, spread, window, lo, hi))
+    key = (digest.hexdigest(), float(tail), float(spread), float(window), float(lo), float(hi),
+           None if dip is None else float(dip), float(min_correlation))
+    return _cached(_CYCLES, key, lambda: _search_steady_cycle(gait, tail, spread, window, lo, hi, dip,
+                                                              min_correlation))
 
 
 _CYCLES: dict[tuple, Cycle] = {}  # find_steady_cycle's results by (content digest, arguments)
 
 
 def _search_steady_cycle(gait: Gait, tail: float, spread: float, window: float, lo: float,
-                         hi: float) -> Cycle:
-    period = estimate_period(gait, lo=lo, hi=hi)
+                         hi: float, dip: float | None = None, min_correlation: float = 0.8) -> Cycle:
+    period = estimate_period(gait, lo=lo, hi=hi, dip=dip, min_correlation=min_correlation)
     legs = [gait.names.index(j) for j in LEG_JOINTS if j in gait.names]
     q = gait.q[:, legs]
     v = gait.velocities()[:, legs] * 0.05

@@ -3,7 +3,10 @@
 ``TeachingStream`` plays a recording (a packaged gait name, e.g. ``walk`` or ``slow``, a CSV in the
 walk data format, or a ``Gait`` made elsewhere, e.g. from a bag) from its start and then its steady
 stride (``gait_data.find_steady_cycle``) over and over, so a short recording teaches for as long as the
-learning needs (a recording without a stride in it: all of it over and over, for the learner to judge);
+learning needs. A stride is taken only from a recording periodic by live teaching's own rule (its period
+past the first lag correlating below ``PERIOD_DIP``, correlating at least ``min_correlation``): looping a
+"stride" cut from a slow drift would make a periodic stream of it, which cpg_node would learn. A recording
+without one (``periodic`` False) streams all of it over and over, for cpg_node to refuse ("not periodic");
 ``speed`` time-scales it (the gait at ``speed`` times its frequency: a stream the recorded gaits never
 were). Teacher time starts at 0.
 """
@@ -18,6 +21,7 @@ from cpg_walker.errors import InputError
 from cpg_walker.robot.gait_data import Gait, find_steady_cycle, load_gait
 from cpg_walker.walker.controller import DOFS, HumanoidCPG
 from cpg_walker.walker.learning import live_teaching_config
+from cpg_walker.walker.live_teaching import PERIOD_DIP
 
 
 class TeachingStream:
@@ -32,14 +36,15 @@ class TeachingStream:
             raise InputError(f"{rec.source}: the recording lacks the CPG's joint(s) {', '.join(missing)}")
         cols = [rec.names.index(j) for j in DOFS]
         self.gait = rec.__class__(rec.name, DOFS, rec.t, rec.q[:, cols], rec.source)
-        cfg = live_teaching_config()  # a stride as long as cpg_node looks for
+        cfg = live_teaching_config()  # a stride as long as cpg_node looks for, periodic as it judges
         try:
-            cyc = find_steady_cycle(rec, lo=cfg.min_period_s, hi=cfg.max_period_s)
+            cyc = find_steady_cycle(rec, lo=cfg.min_period_s, hi=cfg.max_period_s, dip=PERIOD_DIP,
+                                    min_correlation=cfg.min_correlation)
             self.cycle_start, self.cycle_period = float(cyc.start), float(cyc.period)
-            self.periodic = True
-        except InputError:  # no gait in it: the whole recording over and over (cpg_node will judge it)
+            self.periodic, self.why_not_periodic = True, ""
+        except InputError as exc:  # no gait in it: the whole recording over and over (cpg_node refuses it)
             self.cycle_start, self.cycle_period = 0.0, float(rec.duration)
-            self.periodic = False
+            self.periodic, self.why_not_periodic = False, str(exc)
         self.speed = float(speed)
         self.names = DOFS
         self.source = rec.source
