@@ -100,7 +100,7 @@ class Killer(threading.Thread):
     ``after_complete`` trials and its current one has run ``into_s`` wall s; records which trial."""
 
     def __init__(self, url: str, study: str, name: str, proc: subprocess.Popen, after_complete: int = 1,
-                 into_s: float = 0.5):
+                 into_s: float = 0.2):
         super().__init__(daemon=True)
         self.url, self.study, self.name, self.proc = url, study, name, proc
         self.after_complete, self.into_s = after_complete, into_s
@@ -195,6 +195,7 @@ def run_with_workers(spokes, server, study: str, names: list[str], logs: Path, c
     (``url``: the server's, from the root namespace), optionally kill worker ``kill`` mid-trial; the
     study's summary, the wall time and the workers' exit statuses."""
     url = server.url()
+    open_storage(url)  # Optuna's tables, before the workers race to make them
     procs = [start_worker(s, server, study, n, logs / f"worker_{n}.log") for s, n in zip(spokes, names,
                                                                                         strict=False)]
     killer = None

@@ -42,6 +42,8 @@ from cpg_walker.errors import InputError
 
 #: The default storage's file name in an experiment's output directory.
 DEFAULT_DB = "study.db"
+#: Tries to open a storage whose tables another process is creating at the same moment.
+CREATE_ATTEMPTS = 5
 #: Modules whose functions and dataclasses a study may name (a study is data, never arbitrary code).
 TASK_MODULES = "cpg_walker.experiments."
 DATA_MODULES = "cpg_walker."
@@ -117,11 +119,17 @@ def open_storage(url: str, settings: EngineSettings | None = None):
                   grace_period=max(2, round(settings.grace_period_s)),
                   heartbeat_stale_trial_callback=optuna.storages.RetryHeartbeatStaleTrialCallback(
                       max_retry=settings.max_retry))
-    try:
-        storage = optuna.storages.RDBStorage(url, **kw)
-    except Exception as exc:  # a wrong URL, an unreachable server, a missing driver
-        raise InputError(f"cannot open the study storage {redact(url)}: {type(exc).__name__}: "
-                         f"{exc}") from None
+    for attempt in range(CREATE_ATTEMPTS):
+        try:
+            storage = optuna.storages.RDBStorage(url, **kw)
+            break
+        except Exception as exc:  # a wrong URL, an unreachable server, a missing driver
+            # on a new database, workers and a coordinator starting at once race to create Optuna's tables
+            racing = "UniqueViolation" in str(exc) or "already exists" in str(exc)
+            if not racing or attempt == CREATE_ATTEMPTS - 1:
+                raise InputError(f"cannot open the study storage {redact(url)}: {type(exc).__name__}: "
+                                 f"{exc}") from None
+            time.sleep(0.5 * (attempt + 1))
     if url.startswith("sqlite"):
         _immediate_transactions(storage.engine)
     return storage
