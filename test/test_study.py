@@ -86,6 +86,28 @@ def test_storage_urls_and_settings(tmp_path):
         EngineSettings.load(bad)
 
 
+def test_a_task_whose_worker_was_lost_waits_for_its_retry_until_the_retries_are_spent():
+    import optuna
+    from optuna.trial import TrialState
+
+    from cpg_walker.experiments.study import outcome
+
+    def trial(state, number, **attrs):
+        value = {"value": 1.0} if state == TrialState.COMPLETE else {}
+        t = optuna.create_trial(state=state, user_attrs=attrs, **value)
+        t.number = number
+        return t
+
+    lost = trial(TrialState.FAIL, 3)
+    assert outcome([lost], max_retry=2) == ("lost", lost)  # its failer enqueues the retry a moment later
+    assert outcome([lost, trial(TrialState.WAITING, 4)], max_retry=2) == ("pending", None)
+    assert outcome([lost, trial(TrialState.FAIL, 4), trial(TrialState.FAIL, 5)], max_retry=2)[0] == "error"
+    raised = trial(TrialState.FAIL, 3, error="ValueError: x")
+    assert outcome([raised], max_retry=2) == ("error", "ValueError: x")
+    done = trial(TrialState.COMPLETE, 5, result={"__tuple__": [1, 2]})
+    assert outcome([lost, done], max_retry=2) == ("done", (1, 2))
+
+
 def test_a_study_is_resumed_only_when_asked_and_never_mixed(tmp_path):
     url = storage_url(None, tmp_path)
     with Engine(url, "s", "sweep", jobs=0, settings=FAST, attrs={"config": {"a": 1, "b": 2}}) as e:

@@ -13,4 +13,5 @@ SECTIONS: dict[str, str] = {
     "realtime": "cpg_walker.experiments.bench_realtime:run",
     "oscillators": "cpg_walker.experiments.bench_scaling:run_oscillators",
     "robots": "cpg_walker.experiments.bench_scaling:run_robots",
+    "studies": "cpg_walker.experiments.bench_studies:run",
 }

@@ -443,8 +443,10 @@ def _batch(study, batch: str) -> dict[int, list]:
     return out
 
 
-def outcome(trials: list) -> tuple[str, Any]:
-    """("done", result) | ("error", message) | ("pending", None) of one task's trials (its retries)."""
+def outcome(trials: list, max_retry: int) -> tuple[str, Any]:
+    """("done", result) | ("error", message) | ("pending", None) | ("lost", the trial) of one task's trials
+    (its retries). "lost": its last trial's worker was lost and the retry allowed is not enqueued (yet:
+    whoever failed the trial enqueues it a moment later)."""
     from optuna.trial import TrialState
 
     done = sorted((t for t in trials if t.state == TrialState.COMPLETE), key=lambda t: t.number)
@@ -456,6 +458,8 @@ def outcome(trials: list) -> tuple[str, Any]:
     errors = [t.user_attrs["error"] for t in failed if "error" in t.user_attrs]
     if errors:
         return "error", errors[-1]
+    if failed and len(failed) <= max_retry:
+        return "lost", max(failed, key=lambda t: t.number)
     return "error", f"its worker was lost {len(failed)} time(s); not retried again"
 
 
@@ -565,8 +569,22 @@ class Engine:
         return new
 
     def status(self, batch: str, n: int) -> list[tuple[str, Any]]:
+        """Each task's ``outcome``; a lost trial whose retry nobody enqueued within a grace period (its
+        failer died in between) is enqueued again here."""
+        import datetime
+
+        import optuna
+
         have = _batch(self.study, batch)
-        return [outcome(have.get(k, [])) for k in range(n)]
+        out = [outcome(have.get(k, []), self.settings.max_retry) for k in range(n)]
+        now = datetime.datetime.now()
+        for k, (state, trial) in enumerate(out):
+            if state == "lost":
+                if (now - trial.datetime_complete).total_seconds() > self.settings.grace_period_s:
+                    optuna.storages.RetryHeartbeatStaleTrialCallback(
+                        max_retry=self.settings.max_retry)(self.study, trial)
+                out[k] = ("pending", None)
+        return out
 
     def map(self, fn: Callable, items: Iterable, batch: str, progress=None) -> list:
         """Enqueue ``items`` as ``batch`` and return ``[fn(x) for x in items]`` (a task that raised: {"error":
