@@ -37,7 +37,8 @@ ARTIFACTS: tuple[Artifact, ...] = (
     Artifact("two_hosts", "the walk across a veth pair between two network namespaces (root)", ("two-hosts",),
              ("two_hosts.json",), 2.0),
     Artifact("scaleout", "sweep and feedback search as PostgreSQL studies, workers in two network namespaces "
-             "(root)", ("scaleout",), ("scaleout.json", "scaleout.md", "dashboard.png"), 8.0),
+             "(root)", ("scaleout",),
+             ("scaleout.json", "scaleout.md", "dashboard.png", "dashboard_trials.png"), 8.0),
     Artifact("envelope", "which (zeta, alpha) walk, from standing and changed at 10 s, in-process",
              ("envelope",), ("envelope.json", "envelope.md", "envelope.png"), 20.0),
     Artifact("pushes", "the largest lateral pushes recovered standing and walking, in-process", ("pushes",),

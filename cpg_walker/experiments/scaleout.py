@@ -288,8 +288,10 @@ def run_scaleout(out_dir: str | Path, quick: bool = True, jobs: int = 2, sweep_c
 
 
 def dashboard_screenshot(url: str, study: str, png: Path, port: int | None = None) -> dict:
-    """optuna-dashboard on ``url`` and a headless Chromium screenshot of ``study``'s page; the page's address
-    and whether the PNG was written (the reason when it was not)."""
+    """optuna-dashboard on ``url`` and headless Chromium screenshots of ``study``'s page (``png``: history,
+    best trial, importances, timeline) and of its trial table (``png`` with ``_trials``: every trial's
+    parameters and user attributes); the pages' addresses and whether the PNGs were written (the reason
+    when they were not)."""
     from cpg_walker.graph.postgres import free_port
 
     chromium = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
@@ -299,6 +301,7 @@ def dashboard_screenshot(url: str, study: str, png: Path, port: int | None = Non
     study_id = open_storage(url).get_study_id_from_name(study)
     port = port or free_port()
     page = f"http://127.0.0.1:{port}/dashboard/studies/{study_id}"
+    shots = {png: page, png.with_name(png.stem + "_trials" + png.suffix): page + "/trialTable"}
     server = subprocess.Popen([str(dashboard), url, "--host", "127.0.0.1", "--port", str(port)],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
@@ -313,14 +316,16 @@ def dashboard_screenshot(url: str, study: str, png: Path, port: int | None = Non
                 if time.monotonic() > end or server.poll() is not None:
                     return {"written": False, "why": "optuna-dashboard did not answer", "page": page}
                 time.sleep(0.3)
-        subprocess.run([chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-                        "--window-size=1600,1400", "--virtual-time-budget=15000", f"--screenshot={png}",
-                        page],
-                       capture_output=True, timeout=120)
+        for path, address in shots.items():
+            path.unlink(missing_ok=True)
+            subprocess.run([chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+                            "--window-size=1600,1400", "--virtual-time-budget=15000", f"--screenshot={path}",
+                            address], capture_output=True, timeout=120)
     finally:
         os.killpg(server.pid, signal.SIGTERM)
         server.wait(timeout=30)
-    return {"written": png.is_file(), "page": page.replace(str(port), "PORT"),
+    return {"written": all(p.is_file() for p in shots), "pngs": [p.name for p in shots],
+            "pages": [a.replace(str(port), "PORT") for a in shots.values()],
             "command": "optuna-dashboard URL --port PORT"}
 
 
@@ -348,5 +353,8 @@ def markdown(r: dict) -> str:
         lines += [f"Worker {k['worker']} was killed (SIGKILL) during trial #{k['trial']} ({k['batch']} "
                   f"#{k['index']}), after it had completed {k['its_completed_trials_before']} trial(s).", ""]
     if r.get("dashboard", {}).get("written"):
-        lines += ["optuna-dashboard on the search's study: ![dashboard](dashboard.png)", ""]
+        lines += ["optuna-dashboard on the search's study (history and best so far, importances, the "
+                  "timeline with the lost trial), and its trial table (each trial's gains, per-scenario "
+                  "costs and worker):",
+                  "", "![dashboard](dashboard.png)", "", "![trials](dashboard_trials.png)", ""]
     return "\n".join(lines)
