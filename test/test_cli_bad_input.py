@@ -133,6 +133,11 @@ NUMBERS = [
     (["feedback-search", "--out", "{out}"], "--popsize", lambda: ints_below(2)),
     (["feedback-search", "--out", "{out}"], "--jobs", lambda: ints_below(1)),
     (["feedback-search", "--out", "{out}"], "--seed", lambda: ints_outside(0, 2**32 - 1)),
+    (["worker", "--storage", "sqlite:///{tmp}/s.db", "--study", "s"], "--jobs", lambda: ints_below(1)),
+    (["worker", "--storage", "sqlite:///{tmp}/s.db", "--study", "s"], "--wait", negative),
+    (["scaleout", "--out", "{out}"], "--jobs", lambda: ints_below(1)),
+    (["transitions", "--out", "{out}"], "--jobs", lambda: ints_below(1)),
+    (["random-walks", "--out", "{out}"], "--jobs", lambda: ints_below(1)),
     (["node", "list"], "--wait", negative),
     (["node", "info", "/cpg"], "--timeout", negative),
     (["param", "list", "/cpg"], "--timeout", negative),
@@ -165,7 +170,7 @@ OUT_COMMANDS = {
     "faults": [], "feedback-search": [], "fit": ["--csv", "{csv}"], "learn": [], "margins": [],
     "plot": ["{bag}"], "record": [], "replay": [], "section2": [], "soak": [], "sweep": [], "transport": [],
     "results": [], "two-hosts": [], "walk": [], "random-walks": [], "pushes": [], "transitions": [],
-    "teach": ["--gait", "walk"],
+    "teach": ["--gait", "walk"], "scaleout": [],
 }
 OUT_OPTIONS = [(cmd, "--out") for cmd in OUT_COMMANDS] + [("graph", "--log-dir"), ("graph", "--record")]
 

@@ -126,6 +126,22 @@ def test_a_study_is_resumed_only_when_asked_and_never_mixed(tmp_path):
     Engine(url, "s", "sweep", jobs=0, replace=True)  # the default storage of a run that does not resume
 
 
+def test_a_study_command_with_no_one_to_run_it_or_no_study_is_one_error_line(tmp_path, capsys):
+    from cpg_walker.cli.main import main
+
+    def error(argv: list[str]) -> str:
+        assert main(argv) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and ": error: " in lines[0], lines
+        return lines[0]
+
+    assert "--jobs 0 needs --storage" in error(["sweep", "--out", str(tmp_path / "s"), "--jobs", "0"])
+    db = f"sqlite:///{tmp_path}/x.db"
+    assert "no study 'nope'" in error(["worker", "--storage", db, "--study", "nope"])
+    assert "expected a database URL" in error(["worker", "--storage", "x.db", "--study", "s"])
+    assert not (tmp_path / "s" / "sweep.json").exists()
+
+
 def _worker(url: str, study: str, name: str, log: Path, prefix: list[str] | None = None) -> subprocess.Popen:
     cmd = [*(prefix or []), sys.executable, "-m", "cpg_walker.cli.main", "worker", "--storage", url,
            "--study", study, "--jobs", "1", "--name", name, "--wait", "120"]

@@ -133,6 +133,12 @@ def _rows(results: dict) -> list[tuple[str, str, str, str]]:
         add("CPU per sim s, cpg_node (3-node CPG walk, lockstep)",
             walk["cpu_core_fraction"]["cpg_node"] / walk["real_time_factor"], " s",
             "controller ticks in-process", tick * 1e-6 / period, True, ("less", "more"))
+    add("study trials per hour, 2 workers in 2 namespaces over PostgreSQL",
+        get(results, "studies.2_workers.trials_per_hour"), "", "1 worker",
+        get(results, "studies.1_worker.trials_per_hour"), False, ("more", "fewer"))
+    add("study trials per hour, 2 workers in 2 namespaces over PostgreSQL",
+        get(results, "studies.2_workers.trials_per_hour"), "", "one machine, 2 processes, SQLite",
+        get(results, "studies.one_machine_2_processes.trials_per_hour"), False, ("more", "fewer"))
     return rows
 
 
