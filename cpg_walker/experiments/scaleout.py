@@ -289,7 +289,7 @@ def run_scaleout(out_dir: str | Path, quick: bool = True, jobs: int = 2, sweep_c
 
 def dashboard_screenshot(url: str, study: str, png: Path, port: int | None = None) -> dict:
     """optuna-dashboard on ``url`` and headless Chromium screenshots of ``study``'s page (``png``: history,
-    best trial, importances, timeline) and of its trial table (``png`` with ``_trials``: every trial's
+    best trial, importances, timeline) and of its trials page (``png`` with ``_trials``: a trial's
     parameters and user attributes); the pages' addresses and whether the PNGs were written (the reason
     when they were not)."""
     from cpg_walker.graph.postgres import free_port
@@ -301,7 +301,7 @@ def dashboard_screenshot(url: str, study: str, png: Path, port: int | None = Non
     study_id = open_storage(url).get_study_id_from_name(study)
     port = port or free_port()
     page = f"http://127.0.0.1:{port}/dashboard/studies/{study_id}"
-    shots = {png: page, png.with_name(png.stem + "_trials" + png.suffix): page + "/trialTable"}
+    shots = {png: page, png.with_name(png.stem + "_trials" + png.suffix): page + "/trials"}
     server = subprocess.Popen([str(dashboard), url, "--host", "127.0.0.1", "--port", str(port)],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
@@ -354,7 +354,7 @@ def markdown(r: dict) -> str:
                   f"#{k['index']}), after it had completed {k['its_completed_trials_before']} trial(s).", ""]
     if r.get("dashboard", {}).get("written"):
         lines += ["optuna-dashboard on the search's study (history and best so far, importances, the "
-                  "timeline with the lost trial), and its trial table (each trial's gains, per-scenario "
+                  "timeline with the lost trial), and its trials page (a trial's gains, per-scenario "
                   "costs and worker):",
                   "", "![dashboard](dashboard.png)", "", "![trials](dashboard_trials.png)", ""]
     return "\n".join(lines)
