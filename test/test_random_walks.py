@@ -10,7 +10,7 @@ from itertools import pairwise
 
 import pytest
 
-from cpg_walker.experiments.random_commands import _one, sequence, spec
+from cpg_walker.experiments.random_commands import random_walk, sequence, spec
 from cpg_walker.experiments.walk_runs import WalkSpec, run_many, run_walk
 from cpg_walker.walker.governor import GovernorConfig, command_range
 
@@ -32,7 +32,7 @@ def test_sequences_are_seeded_and_inside_the_ranges():
 
 
 def test_random_sequences_walk():
-    runs = run_many(_one, [spec(s, 120.0, fb) for s in SEEDS for fb in ("ours", "off")], jobs=2)
+    runs = run_many(random_walk, [spec(s, 120.0, fb) for s in SEEDS for fb in ("ours", "off")], jobs=2)
     fell = [(r["label"], r["feedback"], r["fall_time_s"]) for r in runs if r["fell"]]
     assert not fell, fell
 
