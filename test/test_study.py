@@ -34,9 +34,11 @@ from cpg_walker.experiments.study import (
 )
 from cpg_walker.experiments.walk_runs import Push, WalkSpec
 
-#: The sweep of the engine tests: test_sweep's tiny grid, each walk 6 sim s after its command (a trial
-#: lasts long enough to be caught running).
-SWEEP = SWEEP_TINY.replace("duration_after_s: 1.0", "duration_after_s: 6.0")
+#: The sweep of the engine tests: test_sweep's tiny grid with our feedback only and one phase per
+#: transition (11 trials), each walk 4 sim s after its command (a trial lasts long enough to be caught
+#: running).
+SWEEP = (SWEEP_TINY.replace("duration_after_s: 1.0", "duration_after_s: 4.0")
+         .replace("variants: ['off', ours]", "variants: [ours]").replace("phases: 2,", "phases: 1,"))
 #: Heartbeats of the tests' studies: a lost trial is enqueued again 4 s after its last heartbeat.
 FAST = EngineSettings(heartbeat_interval_s=1.0, grace_period_s=4.0, max_retry=3, poll_s=0.2)
 
