@@ -93,7 +93,9 @@ def _links() -> list[str]:
             for line in _ip(["ip", "-o", "link", "show"]).splitlines() if line.count(":") >= 2]
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (also when it is another user's): how stale resources of crashed runs,
+    named after their creator's pid, are recognised."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -114,12 +116,12 @@ def remove_stale() -> list[str]:
     gone = []
     for name in _names():
         parts = name.split("-")
-        if len(parts) == 4 and parts[0] == PREFIX and parts[1].isdigit() and not _alive(int(parts[1])):
+        if len(parts) == 4 and parts[0] == PREFIX and parts[1].isdigit() and not process_alive(int(parts[1])):
             subprocess.run(["ip", "netns", "delete", name], capture_output=True, timeout=30)
             gone.append(name)
     for name in _links():
         match = _ROOT_END.fullmatch(name)
-        if match and not _alive(int(match.group(1))):
+        if match and not process_alive(int(match.group(1))):
             subprocess.run(["ip", "link", "delete", name], capture_output=True, timeout=30)
             gone.append(name)
     return gone

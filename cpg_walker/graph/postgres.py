@@ -25,6 +25,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from cpg_walker.graph.netns import process_alive
+
 #: Where the servers' directories go, and the start of their names (``<STALE_PREFIX><pid>-<random>``).
 ROOT = Path("/tmp")
 STALE_PREFIX = "cpgw-pg-"
@@ -87,16 +89,6 @@ def unavailable() -> str | None:
     return None
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _env() -> dict[str, str]:
     """Our environment without libpq's PG* variables (a PGDATA or PGPORT of the caller must not steer the
     tools), in the C locale."""
@@ -134,7 +126,7 @@ def remove_stale() -> list[Path]:
     gone = []
     for d in ROOT.glob(f"{STALE_PREFIX}*"):
         pid = d.name[len(STALE_PREFIX):].split("-")[0]
-        if d.is_dir() and pid.isdigit() and not _alive(int(pid)):
+        if d.is_dir() and pid.isdigit() and not process_alive(int(pid)):
             _stop(d, "immediate")
             shutil.rmtree(d, ignore_errors=True)
             gone.append(d)
