@@ -26,7 +26,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 HANDOVER_S = 6.616  # the CPG drives alone from here (cpg_node: recording's opening steps + 1 s cross-fade)
 STALL_WALL_S = 0.2  # how long a node is frozen
-AFTER_S = 8.0  # sim s the robot must walk on after a stall
+AFTER_S = 6.0  # sim s the robot must walk on after a stall (more than two strides)
 
 
 def _sim_time(probe) -> float:
