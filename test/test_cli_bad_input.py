@@ -164,6 +164,14 @@ def test_a_bad_number_is_one_line_naming_the_option(capsys, place, data):
     one_line_error(capsys, [*_fill(prefix, place), f"{option}={value}"], option)
 
 
+def test_an_infinite_rate_or_wait_is_refused_not_run_for_ever(capsys):
+    """`topic pub -r inf` was accepted and published until interrupted (the fuzz above drew it now and then,
+    and the suite hung there)."""
+    for option in ("--rate", "--max-wait-time-secs", "--keep-alive"):
+        for value in ("inf", "Infinity", "-inf"):
+            one_line_error(capsys, ["topic", "pub", "/x", "std_msgs/msg/Empty", f"{option}={value}"], option)
+
+
 # Every command writing into a directory, with the other required options (valid) before --out.
 OUT_COMMANDS = {
     "bench": [], "cmd-vel-map": [], "cpg-walk": [], "demo": [], "drive-check": [], "envelope": [],

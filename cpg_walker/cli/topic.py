@@ -5,6 +5,7 @@ without ros2cli, on the domain in ROS_DOMAIN_ID, generic over the message types 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from cpg_walker.cli.checks import at_least, count, non_negative, positive
@@ -50,8 +51,8 @@ def _positive_float(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expects a number, got {text!r}") from None
-    if not value > 0.0:
-        raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+    if not 0.0 < value < math.inf:  # inf: a rate of "as fast as it goes" for ever, or a wait of for ever
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
     return value
 
 
