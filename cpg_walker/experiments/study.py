@@ -273,7 +273,12 @@ def _objective(worker: str, current: dict):
         for name, (_, low, high) in (kind.params(item) if kind.params else {}).items():
             trial.suggest_float(name, low, high)  # the enqueued value
         try:
-            result = kind.fn(item)
+            _stop_point()
+            _SIGNALLED["in_task"] = True
+            try:
+                result = kind.fn(item)
+            finally:
+                _SIGNALLED["in_task"] = False
             value = float(kind.value(result))
         except Exception as exc:
             trial.set_user_attr("error", f"{type(exc).__name__}: {exc}")
@@ -289,8 +294,35 @@ def _objective(worker: str, current: dict):
     return run
 
 
+#: A worker process's stop request (SIGTERM, Ctrl-C) and whether it is inside a task's own code right now.
+_SIGNALLED = {"stop": False, "in_task": False}
+
+
 def _interrupt(*_: Any) -> None:
+    """SIGTERM / SIGINT in a worker: interrupt the task at once when it is running its own code; anywhere
+    else (the storage's transactions: an exception there left SQLite's write lock held by a transaction
+    never ended, and the worker's next write waited the full timeout for it) only ask the worker to stop
+    at its next safe point."""
+    _SIGNALLED["stop"] = True
+    if _SIGNALLED["in_task"]:
+        _SIGNALLED["in_task"] = False
+        raise KeyboardInterrupt
+
+
+def _raise_interrupt(*_: Any) -> None:
     raise KeyboardInterrupt
+
+
+def _install_stop_handlers(sigint: bool = True) -> None:
+    signal.signal(signal.SIGTERM, _interrupt)
+    if sigint:
+        signal.signal(signal.SIGINT, _interrupt)
+
+
+def _stop_point() -> None:
+    """Raise KeyboardInterrupt here, at a safe point, when a stop was asked for."""
+    if _SIGNALLED["stop"]:
+        raise KeyboardInterrupt
 
 
 def connect(url: str, name: str, wait_s: float = 0.0, poll_s: float = 0.5):
@@ -332,6 +364,7 @@ def work(url: str, name: str, worker: str | None = None, stop: Callable[[], bool
     objective = _objective(worker, current)
     ran = 0
     while not (stop and stop()):
+        _stop_point()
         optuna.storages.fail_stale_trials(study)
         if until is not None and until(study):
             break
@@ -378,7 +411,7 @@ def _requeue(study, number: int | None, settings: EngineSettings) -> None:
 
 def _local_worker(url: str, name: str, worker: str, stop_event) -> None:
     """A coordinator's worker process (spawned): work until the coordinator sets ``stop_event``."""
-    signal.signal(signal.SIGTERM, _interrupt)
+    _install_stop_handlers(sigint=False)
     try:
         work(url, name, worker, stop=stop_event.is_set)
     except KeyboardInterrupt:
@@ -393,7 +426,7 @@ def run_workers(url: str, name: str, jobs: int, worker: str | None = None, wait_
     worker = worker or f"{socket.gethostname()}:{os.getpid()}"
     connect(url, name, wait_s)  # fail early, with the reason, before starting processes
     if jobs == 1:
-        signal.signal(signal.SIGTERM, _interrupt)
+        _install_stop_handlers()
         return work(url, name, worker, log=_stderr)
     ctx = mp.get_context("spawn")
     counts = ctx.Queue()
@@ -401,7 +434,7 @@ def run_workers(url: str, name: str, jobs: int, worker: str | None = None, wait_
              for k in range(jobs)]
     for p in procs:
         p.start()
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGTERM, _raise_interrupt)  # this parent only waits: it forwards the stop
     try:
         for p in procs:
             p.join()
@@ -419,7 +452,7 @@ def run_workers(url: str, name: str, jobs: int, worker: str | None = None, wait_
 
 def _counted_worker(url: str, name: str, worker: str, counts) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent forwards Ctrl-C as SIGTERM
-    signal.signal(signal.SIGTERM, _interrupt)
+    _install_stop_handlers(sigint=False)
     n = 0
     try:
         n = work(url, name, worker, log=_stderr)
