@@ -365,13 +365,13 @@ def wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
-def hip_yaw_offsets(u: float, theta_ref: float, phi_td: float,
-                    dtheta: float) -> tuple[np.ndarray, np.ndarray]:
+def hip_yaw_offsets(u, theta_ref, phi_td: float, dtheta: float) -> tuple[np.ndarray, np.ndarray]:
     """(left, right) hip-yaw (q, q̇) of the heading pathway: q_R = u·cos(θ − φ_TD) = −q_L (module
-    docstring); ``dtheta`` = dθ_ref/dt (rad/s)."""
-    c, sn = math.cos(theta_ref - phi_td), math.sin(theta_ref - phi_td)
-    q = np.array([-u * c, u * c])
-    qd = np.array([u * sn * dtheta, -u * sn * dtheta])
+    docstring); ``dtheta`` = dθ_ref/dt (rad/s). ``u`` and ``theta_ref`` scalars (two values) or (K,)
+    arrays (K rows of two: a whole forecast at once)."""
+    c, sn = np.cos(theta_ref - phi_td), np.sin(theta_ref - phi_td)
+    q = np.stack([-u * c, u * c], axis=-1)
+    qd = np.stack([u * sn * dtheta, -u * sn * dtheta], axis=-1)
     return q, qd
 
 

@@ -437,20 +437,36 @@ class FeedbackGaitSource(CPGGaitSource):
         return q, qd
 
     def forecast(self, times: np.ndarray, fade: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """`CPGGaitSource.forecast` plus the heading pathway's hip-yaw oscillation at the held u (its
-        phase advanced at the current frequency; ``fade`` scales it with the steps)."""
+        """`CPGGaitSource.forecast` plus the heading pathway's hip-yaw oscillation and the side step at
+        the held amplitudes (their phase advanced at the current frequency; ``fade`` scales them with the
+        steps), and the ankle and free-leg offsets dying out ahead. All points at once: cpg_node computes
+        this horizon between two ticks (a per-point loop took 2 of its 3 ms, longer than a tick)."""
         q, qd = super().forecast(times, fade)
-        if self._offsets_act():
-            times = np.asarray(times, dtype=float).reshape(-1)
-            for k in np.flatnonzero(times >= self.active_from):
-                ahead = max(float(times[k]) - self._t_net, 0.0)
-                scale = 1.0 if fade is None else float(fade[k])
-                self._add_hip_yaw(q[k], qd[k], ahead, scale)
-                self._add_side_step(q[k], qd[k], ahead, scale)
-                hold = scale * math.exp(-ahead / ANKLE_HOLD_S)  # a reaction to now: it dies out ahead
-                q[k, ANKLE_PITCH] += hold * self._ankle[0]
-                q[k, ANKLE_ROLL] += hold * self._ankle[1]
-                q[k, HIP_ROLL] += hold * np.asarray(self._free_leg)
+        if not self._offsets_act():
+            return q, qd
+        times = np.asarray(times, dtype=float).reshape(-1)
+        rows = np.flatnonzero(times >= self.active_from)
+        if rows.size == 0:
+            return q, qd
+        ahead = np.maximum(times[rows] - self._t_net, 0.0)
+        scale = np.ones(rows.size) if fade is None else np.asarray(fade, dtype=float).reshape(-1)[rows]
+        theta, w = self._reference_phase(0.0)
+        theta = theta + w * ahead
+        phi_td = touchdown_phase(self.ctrl.zeta, self.fb.cfg)
+        if self._yaw_u != 0.0:
+            dq, dqd = hip_yaw_offsets(scale * self._yaw_u, theta, phi_td, w)
+            q[np.ix_(rows, self._yaw_idx)] += dq
+            qd[np.ix_(rows, self._yaw_idx)] += dqd
+        if self._side_v != 0.0:
+            phase = theta + self.fb.cfg.side_step_phase_rad
+            dq, dqd = hip_yaw_offsets(scale * self._side_v, phase, phi_td, w)
+            for idx, sign in ((HIP_ROLL, 1.0), (ANKLE_ROLL, -1.0)):
+                q[np.ix_(rows, idx)] += sign * dq
+                qd[np.ix_(rows, idx)] += sign * dqd
+        hold = (scale * np.exp(-ahead / ANKLE_HOLD_S))[:, None]  # a reaction to now: it dies out ahead
+        q[np.ix_(rows, ANKLE_PITCH)] += hold * self._ankle[0]
+        q[np.ix_(rows, ANKLE_ROLL)] += hold * self._ankle[1]
+        q[np.ix_(rows, HIP_ROLL)] += hold * np.asarray(self._free_leg)[None]
         return q, qd
 
     def _offsets_act(self) -> bool:
