@@ -27,7 +27,8 @@ from cpg_walker.walker.feedback import FeedbackConfig, FeedbackController
 def limits(**kw) -> CmdVelLimits:
     base = {"timeout": 0.5, "max_linear_x": 0.11, "min_linear_x": -0.1, "max_angular_z": 0.15,
             "stand_below": 0.005, "alpha_fall_rate": 1000.0,  # 1000: α drops within a tick
-            "angular_z_rate": 1000.0, "angular_z_rate_in_place": 1000.0, "max_linear_y": 0.05}
+            "angular_z_rate": 1000.0, "angular_z_rate_in_place": 1000.0, "max_linear_y": 0.05,
+            "steer_alpha": 0.3, "turn_alpha": 0.25}
     return CmdVelLimits(**{**base, **kw})
 
 
@@ -126,8 +127,8 @@ def test_follower_follows_times_out_and_resumes():
     assert out.state == "following" and out == CmdVelOutput(1.0, pytest.approx(0.4), 0.0, "following")
     f.command(12.1, 0.0, 0.0)  # zero speed: stand, keep the direction
     assert f.update(12.102, 1.0, 0.4) == CmdVelOutput(1.0, 0.0, 0.0, "standing")
-    f.command(12.15, 0.0, 0.1)  # zero speed, a turn: step in place at (steer_zeta, steer_alpha)
-    assert f.update(12.152, 1.0, 0.0) == CmdVelOutput(1.5, 0.3, 0.1, "stepping in place")
+    f.command(12.15, 0.0, 0.1)  # zero speed, a turn: step in place at (steer_zeta, turn_alpha)
+    assert f.update(12.152, 1.0, 0.0) == CmdVelOutput(1.5, 0.25, 0.1, "stepping in place")
     f.command(12.2, 0.2, 1.0)  # clamped to the limits
     assert f.update(12.202, 1.0, 0.0) == CmdVelOutput(1.5, 1.0, 0.15, "following")
 
@@ -310,8 +311,8 @@ def test_packaged_timeout_keeps_following_a_one_hertz_sender():
 
 
 def test_steering_steps_in_place_or_faster_and_slews_the_turn():
-    """linear.x ~ 0 with a turn or linear.y steps in place at (±steer_zeta, steer_alpha) in the walking
-    direction; a turn faster than GENTLE_TURN (or a side step) while walking steps at steer_zeta with the
+    """linear.x ~ 0 with a turn steps in place at (±steer_zeta, turn_alpha) in the walking direction, with
+    a linear.y at (±steer_zeta, steer_alpha); a turn faster than GENTLE_TURN (or a side step) while walking steps at steer_zeta with the
     α that keeps the speed (``SpeedMap.alpha_at``); gentler turns keep the map's (ζ, α); linear.y is
     clamped to max_linear_y; the turn output moves at most angular_z_rate_in_place per sim s in place,
     angular_z_rate otherwise."""
@@ -320,7 +321,9 @@ def test_steering_steps_in_place_or_faster_and_slews_the_turn():
     m = SpeedMap(toy_map())
     f = CmdVelFollower(m, limits(), zeta=-1.0)
     f.command(0.0, 0.0, 0.4)
-    assert f.target == (-1.5, 0.3, 0.15)  # backward walker: in place at ζ -1.5; turn clamped to 0.15
+    assert f.target == (-1.5, 0.25, 0.15)  # backward walker: in place at ζ -1.5; turn clamped to 0.15
+    f.command(0.05, 0.0, 0.4, 0.02)
+    assert f.target == (-1.5, 0.3, 0.15) and f.target_y == 0.02  # and a side step: steer_alpha
     f = CmdVelFollower(m, limits(max_angular_z=0.5), zeta=1.0)
     f.command(0.0, 0.08, GENTLE_TURN)
     assert f.target == (*m.command(0.08, f.limits), GENTLE_TURN)

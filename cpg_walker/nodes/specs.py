@@ -177,8 +177,9 @@ CPG_CMD_VEL_LIMITS = (
     double("cmd_vel.max_linear_y", "largest |linear.y| followed (m/s, sideways; larger is clamped; the "
            "range: what walked, docs/steering.md)", 0.0, 0.034),
     double("cmd_vel.steer_zeta", "|zeta| at least, while turning or side-stepping", 0.3, 2.0),
-    double("cmd_vel.steer_alpha", "alpha at least, while turning or side-stepping (stepping in place)",
-           0.01, 1.0),
+    double("cmd_vel.steer_alpha", "alpha at least, while turning or side-stepping (side-stepping in "
+           "place: exactly)", 0.01, 1.0),
+    double("cmd_vel.turn_alpha", "alpha of a turn in place (no linear.x, no linear.y)", 0.01, 1.0),
     double("cmd_vel.angular_z_rate", "the turn rate moves at most this much per sim s walking (rad/s^2)",
            0.01, 100.0),
     double("cmd_vel.angular_z_rate_in_place", "the same stepping in place (rad/s^2)", 0.01, 100.0),

@@ -37,7 +37,8 @@ from cpg_walker.errors import InputError
 
 #: keys of a CmdVelLimits (and of cpg_node's ``cmd_vel.<key>`` parameters)
 LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand_below", "alpha_fall_rate",
-              "max_linear_y", "steer_zeta", "steer_alpha", "angular_z_rate", "angular_z_rate_in_place")
+              "max_linear_y", "steer_zeta", "steer_alpha", "turn_alpha", "angular_z_rate",
+              "angular_z_rate_in_place")
 
 
 def _read_yaml(path: str | Path | None, default: str) -> tuple[dict, Path]:
@@ -217,6 +218,7 @@ class CmdVelLimits:
     max_linear_y: float = 0.0
     steer_zeta: float = 1.5
     steer_alpha: float = 0.3
+    turn_alpha: float = 0.25
     angular_z_rate: float = 0.3
     angular_z_rate_in_place: float = 1.0
 
@@ -234,9 +236,11 @@ class CmdVelLimits:
             raise ValueError(f"cmd_vel.max_angular_z must be in [0, 1] rad/s, got {self.max_angular_z}")
         if not 0 <= self.max_linear_y <= 0.2:
             raise ValueError(f"cmd_vel.max_linear_y must be in [0, 0.2] m/s, got {self.max_linear_y}")
-        if not 0.3 <= self.steer_zeta <= 2.0 or not 0 < self.steer_alpha <= 1.0:
-            raise ValueError(f"cmd_vel.steer_zeta must be in [0.3, 2] and cmd_vel.steer_alpha in (0, 1], got "
-                             f"{self.steer_zeta} / {self.steer_alpha}")
+        if not 0.3 <= self.steer_zeta <= 2.0:
+            raise ValueError(f"cmd_vel.steer_zeta must be in [0.3, 2], got {self.steer_zeta}")
+        for k in ("steer_alpha", "turn_alpha"):
+            if not 0 < getattr(self, k) <= 1.0:
+                raise ValueError(f"cmd_vel.{k} must be in (0, 1], got {getattr(self, k)}")
         for k in ("angular_z_rate", "angular_z_rate_in_place"):
             if not getattr(self, k) > 0:
                 raise ValueError(f"cmd_vel.{k} must be > 0 rad/s^2, got {getattr(self, k)}")
@@ -363,8 +367,8 @@ class CmdVelFollower:
         """The target (ζ, α, turn rate) and sideways speed of the last Twist. A turn faster than
         GENTLE_TURN, or a sideways speed of at least stand_below, steps at |ζ| >= steer_zeta and α >=
         steer_alpha, its forward speed kept by the α at that ζ (``SpeedMap.alpha_at``); with |linear.x|
-        below stand_below a turn of at least STEER_MIN_ANGULAR_Z (or a side step) steps in place at
-        (±steer_zeta, steer_alpha). Gentler turns walk at the speed map's (ζ, α)."""
+        below stand_below a side step steps in place at (±steer_zeta, steer_alpha), a turn alone of at least
+        STEER_MIN_ANGULAR_Z at (±steer_zeta, turn_alpha). Gentler turns walk at the speed map's (ζ, α)."""
         _, vx, wz = self.last  # type: ignore[misc]
         lim = self.limits
         wz, vy = lim.clamp_angular(wz), lim.clamp_lateral(self.linear_y) if self.side_step_allowed else 0.0
@@ -373,7 +377,7 @@ class CmdVelFollower:
         if a == 0.0:
             z = self.zeta  # standing (or stepping in place): keep the walking direction
             if side or abs(wz) >= STEER_MIN_ANGULAR_Z:
-                z, a = math.copysign(lim.steer_zeta, z), lim.steer_alpha
+                z, a = math.copysign(lim.steer_zeta, z), lim.steer_alpha if side else lim.turn_alpha
         elif (side or abs(wz) > GENTLE_TURN) and abs(z) < lim.steer_zeta:
             v = lim.clamp_linear(vx)
             z = math.copysign(lim.steer_zeta, v)
