@@ -200,6 +200,41 @@ def test_the_ankle_pathway_acts_in_lockstep_or_when_allowed_in_realtime() -> Non
     assert all(abs(v) > 0.01 for v in (*offsets["allowed"], *offsets["lockstep"])), offsets
 
 
+def _tilted_ticks(d: CPGDriver, t0_ms: int, t1_ms: int, vy: float | None = None) -> list[bool]:
+    """Ticks from t0 to t1 with a rolling and pitching chest (and a /cmd_vel side step of ``vy`` every
+    0.1 s unless None); whether the ankle pathway was allowed at each."""
+    quat, gyro = np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.4, 0.3, 0.0])
+    allowed = []
+    for t in range(t0_ms * MS, t1_ms * MS, PERIOD):
+        if vy is not None and t % (100 * MS) == 0:
+            d.twist(0.0, 0.0, vy)
+        d.sample(0, t, (quat, gyro))
+        d.sample(1, t, 20.0)
+        d.sample(2, t, 20.0)
+        d.clock(t)
+        allowed.append(d.source.fb.ankle_allowed)
+    return allowed
+
+
+def test_a_side_step_closes_the_ankle_pathway_in_realtime_while_it_lasts() -> None:
+    """Outside lockstep, ``ankle_for_side_step`` (the default) closes the ankle pathway for a /cmd_vel side
+    step from its command until its amplitude has wound down after it; without it the side step is
+    refused (counted as 0, the reason on the status) and the pathway stays out."""
+    for for_side in (True, False):
+        ctrl, settings = _setup()
+        settings["feedback"] = FeedbackController(FeedbackConfig.load(), default_pathways())
+        d, _ = _make(ctrl, {**settings, "feedback_on": True, "horizon_s": 0.0,
+                            "ankle_for_side_step": for_side})
+        assert not any(_tilted_ticks(d, 0, 8_000)) and d.source.fb.ankle_offsets() == (0.0, 0.0)
+        allowed = _tilted_ticks(d, 8_000, 14_000, 0.03)
+        assert d.source.side_stepping is for_side and allowed[-1] is for_side
+        assert (d.cmd_side == "ok") is for_side and (for_side or "ankle_for_side_step" in d.cmd_side)
+        if for_side:
+            assert abs(d.source.fb.ankle_offsets()[0]) > 0.01
+        allowed = _tilted_ticks(d, 14_000, 20_000)  # no more commands: the timeout, the amplitude winds down
+        assert not d.source.side_stepping and not allowed[-1]
+
+
 def test_started_at_alpha_0_it_stands_without_the_recorded_opening_steps() -> None:
     """α 0 at the start: the source fades in from standing (no recorded steps to stop from); otherwise the
     recording's opening steps hand over to the CPG."""

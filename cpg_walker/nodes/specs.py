@@ -215,6 +215,9 @@ CPG = (
     boolean("ankle_in_realtime", "the ankle feedback pathway acts outside lockstep too (its rate gains need "
             "a loop that waits for its samples: on an overloaded realtime machine it fell, docs/governor.md)",
             read_only=True),
+    boolean("ankle_for_side_step", "without ankle_in_realtime, a /cmd_vel side step closes the ankle "
+            "pathway while it lasts (side steps need it; false: linear.y is refused outside lockstep)",
+            read_only=True),
     boolean("feedback", "close the sensory feedback pathways (false: the open-loop CPG)"),
     double("sensor_timeout", "sim s without a newer /imu or /foot_load sample before feedback fades out",
            1e-3, 10.0),

@@ -347,6 +347,12 @@ class CmdVelFollower:
             if self.last is not None:
                 self._retarget()
 
+    @property
+    def side_step_commanded(self) -> bool:
+        """The last Twist's side step is followed or waited for (a non-zero linear.y that may side-step,
+        not timed out)."""
+        return self.last is not None and self.target_y != 0.0 and self.state != "timed_out"
+
     def set_limits(self, limits: CmdVelLimits) -> None:
         self.limits = limits
         if self.last is not None:

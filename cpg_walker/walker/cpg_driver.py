@@ -140,16 +140,19 @@ def turn_unavailable(enabled: bool, weight: float, pathways: tuple[str, ...]) ->
     return ""
 
 
-def side_step_unavailable(turn_reason: str, ankle_allowed: bool, pathways: tuple[str, ...]) -> str:
+def side_step_unavailable(turn_reason: str, ankle_allowed: bool, pathways: tuple[str, ...],
+                          ankle_for_side_step: bool = False) -> str:
     """Why linear.y cannot side-step the robot ('' if it can): the side step walks only with the heading
     pathway's oscillator phase and the ankle pathway's balance (without it every side step measured
-    in-process fell within 12 s, docs/steering.md)."""
+    in-process fell within 12 s, docs/steering.md); ``ankle_for_side_step``: the ankle pathway, off
+    here, is closed for the side step."""
     if turn_reason:
         return turn_reason
     if "ankle" not in pathways:
         return "the ankle feedback pathway is not in feedback_pathways"
-    if not ankle_allowed:
-        return "the ankle pathway is off in realtime (cpg_node ankle_in_realtime false)"
+    if not ankle_allowed and not ankle_for_side_step:
+        return ("the ankle pathway is off in realtime (cpg_node ankle_in_realtime and ankle_for_side_step "
+                "false)")
     return ""
 
 
@@ -159,14 +162,17 @@ class CPGDriver:
     and ``alpha``: the commands to walk at (``command`` changes them: the one entry point for the
     parameters; /cmd_vel's output goes through the same gait source). ``horizon_s`` 0: no horizon.
     ``wall``: the monotonic wall clock of the lockstep sensor wait. The ankle pathway acts only in
-    ``lockstep`` or with ``ankle_in_realtime`` (its rate gains need a loop that waits for its samples)."""
+    ``lockstep`` or with ``ankle_in_realtime`` (its rate gains need a loop that waits for its samples);
+    otherwise, with ``ankle_for_side_step``, while a /cmd_vel side step is commanded or still winding down
+    (side steps need it)."""
 
     def __init__(self, ctrl: HumanoidCPG, out: DriverOutput, *, feedback: FeedbackController,
                  feedback_on: bool, fade: FeedbackFade, zeta: float, alpha: float, speed_map: SpeedMap,
                  cmd_vel_limits: CmdVelLimits, follow_cmd_vel: bool = True, lookahead: bool = True,
                  monitor_period_ns: int = 100_000_000, horizon_s: float = 0.0, horizon_stop_s: float = 0.0,
                  horizon_step_ns: int = 40_000_000, rejoin_settle_ns: int = 0, lockstep: bool = False,
-                 ankle_in_realtime: bool = False, sensor_wait_s: float = 0.4,
+                 ankle_in_realtime: bool = False, ankle_for_side_step: bool = True,
+                 sensor_wait_s: float = 0.4,
                  governor: GovernorConfig | None = None, wall: Callable[[], float] = time.monotonic,
                  teacher: LiveTeacher | None = None, teach_steps: int = 2,
                  teach_blend_s: float = 2.0) -> None:
@@ -216,6 +222,7 @@ class CPGDriver:
         self.cmd_turn = "ok"  # ok | why angular.z cannot turn the robot
         self.cmd_side = "ok"  # ok | why linear.y cannot side-step it
         self.ankle_allowed = self.lockstep or bool(ankle_in_realtime)
+        self.ankle_for_side_step = bool(ankle_for_side_step)
         self._start(feedback)
 
     def _start(self, fb: FeedbackController) -> None:
@@ -344,13 +351,21 @@ class CPGDriver:
         self.cmd.command(t, float(linear_x), float(angular_z), float(linear_y))
 
     def _cmd_vel_tick(self, t_ns: int) -> None:
+        """The follower's output for tick t_ns, and the ankle pathway for a side step (class docstring)."""
+        self._follow_cmd_vel(t_ns)
+        fb = self.source.fb
+        side = not self.cmd_override and self.cmd.side_step_commanded
+        fb.ankle_allowed = self.ankle_allowed or (self.ankle_for_side_step
+                                                  and (side or self.source.side_stepping))
+
+    def _follow_cmd_vel(self, t_ns: int) -> None:
         """Apply the follower's output for tick t_ns (once the CPG has taken over)."""
         if self.cmd.last is None or self.cmd_override or t_ns < self.walk_from_s * 1e9 \
                 or self.pending is not None:  # a take-over stands the robot first
             return
         fb = self.source.fb
         reason = turn_unavailable(self.feedback_on, self.fade.weight, fb.pathways)
-        side = side_step_unavailable(reason, self.ankle_allowed, fb.pathways)
+        side = side_step_unavailable(reason, self.ankle_allowed, fb.pathways, self.ankle_for_side_step)
         self.cmd.allow_side_step(not side)
         out = self.cmd.update(t_ns / 1e9, self.ctrl.zeta, self.ctrl.alpha)
         if out is None:
@@ -760,7 +775,7 @@ class CPGDriver:
              "feedback_weight": f"{self.fade.weight:.6g}",
              "sensor_age_s": "none" if self.sensor_age_s is None else f"{self.sensor_age_s:.3f}",
              "feedback_pathways": ",".join(fb.pathways), "phase_resets": str(len(fb.resets)),
-             "ankle_allowed": str(self.ankle_allowed).lower(),
+             "ankle_allowed": str(self.ankle_allowed).lower(), "ankle_closed": str(fb.ankle_allowed).lower(),
              **{k: str(n) for k, n in c.items()},
              "reentries": str(self.reentries), "reentry_cause": self.reentry_cause,
              "rejoined_at_s": "none" if self.rejoined_at_s is None else f"{self.rejoined_at_s:.3f}",
@@ -791,7 +806,8 @@ class CPGDriver:
                     "dropped": c["sensors_dropped"], "wait_timeouts": c["sensor_wait_timeouts"],
                     "clock_dropped": c["clock_dropped"], "targets_withheld": c["targets_withheld"],
                     "sample_age": {**self.sample_ages, "max_s": round(self.sample_ages["max_s"], 4)},
-                    "ankle_allowed": self.ankle_allowed, "ankle_fresh": fb.ankle_fresh}
+                    "ankle_allowed": self.ankle_allowed, "ankle_for_side_step": self.ankle_for_side_step,
+                    "ankle_fresh": fb.ankle_fresh}
         return {**self.activity.summary(), "overruns": timing["overruns"], "tick": timing,
                 "feedback": feedback, "cmd_vel": self.cmd_vel_counts, "rejoined_at_s": self.rejoined_at_s,
                 "reentries": self.reentries, "clock_resets": self.clock_resets,

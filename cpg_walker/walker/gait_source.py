@@ -399,6 +399,11 @@ class FeedbackGaitSource(CPGGaitSource):
             self.g_trace.append((t, *fb.psi, float(g[ANKLE2[0]]), float(g[KNEE[0]])))
             self._next_trace = t + self.trace_dt
 
+    @property
+    def side_stepping(self) -> bool:
+        """A side step is commanded or its amplitude has not yet wound down to 0."""
+        return self.side_step != 0.0 or self._side_v != 0.0
+
     def _side_step_update(self, t: float, stride_s: float) -> None:
         """Move the side step's amplitude toward side_step_gain·linear.y·T (clipped), at side_step_rate."""
         cfg = self.fb.cfg
