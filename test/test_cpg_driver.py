@@ -78,6 +78,22 @@ def test_each_tick_sends_its_target_and_the_next_and_a_resent_tick_the_same_agai
     assert [t for t, _ in out.monitors] == [0] and out.monitors[0][1]["zeta_command"] == "1"
 
 
+def test_the_horizon_goes_out_every_horizon_period_with_points_every_horizon_step() -> None:
+    """``horizon_period`` spaces the messages (0: every horizon_step), ``horizon_step`` their points; a
+    period longer than half the horizon is refused (pid_node could ride less than half of it)."""
+    for period_ms, every_ms in ((0, 40), (200, 200)):
+        ctrl, settings = _setup()
+        d, out = _make(ctrl, {**settings, "horizon_period_ns": period_ms * MS})
+        _run(d, 0, 1000 * MS)
+        starts = [t for t, _ in out.horizons]
+        assert np.all(np.diff(starts) == every_ms * MS), starts
+        offsets = out.horizons[-1][1]
+        assert np.all(np.diff(offsets[offsets >= 40 * MS]) == 40 * MS) and offsets[-1] == 4000 * MS
+    ctrl, settings = _setup()
+    with pytest.raises(ValueError, match="half the horizon"):
+        _make(ctrl, {**settings, "horizon_period_ns": 600 * MS})
+
+
 def test_a_command_before_the_takeover_waits_for_it_and_one_after_applies_at_once() -> None:
     d, _ = _make(*_setup())
     _run(d, 0, 100 * MS)

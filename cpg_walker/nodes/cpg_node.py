@@ -2,7 +2,7 @@
 
 Wiring around ``walker.cpg_driver.CPGDriver`` (the CPG on sim time, its feedback, /cmd_vel follower and
 horizon): parameters, subscriptions, publishers, diagnostics. Every /clock tick gives /joint_targets
-stamped with it (and, with ``lookahead``, the next period's), every ``horizon_step`` a /joint_trajectory
+stamped with it (and, with ``lookahead``, the next period's), every ``horizon_period`` a /joint_trajectory
 (the next ``horizon`` s, then ``horizon_stop`` s in which the stepping dies out: where pid_node goes if
 this node dies), every ``monitor_period`` /cpg/state and /diagnostics. ``zeta``/``alpha`` command the
 oscillators (the CPG's smoothed ζ/α), never a scaling of the output.
@@ -122,6 +122,7 @@ class CPGNode(Node):
             lookahead=v["lookahead"],
             monitor_period_ns=round(v["monitor_period"] * 1e9), horizon_s=v["horizon"],
             horizon_step_ns=round(v["horizon_step"] * 1e9), horizon_stop_s=v["horizon_stop"],
+            horizon_period_ns=round(v["horizon_period"] * 1e9),
             rejoin_settle_ns=round(v["rejoin_settle"] * 1e9),
             governor=governor, teacher=self._teacher(v["teach"], ctrl.net.N), teach_steps=v["teach_steps"],
             teach_blend_s=v["teach_blend"])

@@ -203,8 +203,9 @@ CPG = (
     *SCHEDULING,
     double("horizon", "sim s of future targets in each /joint_trajectory (0 = none published)", 0.0, 5.0,
            read_only=True),
-    double("horizon_step", "sim s between /joint_trajectory points and between messages", 0.002, 1.0,
-           read_only=True),
+    double("horizon_step", "sim s between /joint_trajectory points", 0.002, 1.0, read_only=True),
+    double("horizon_period", "sim s between /joint_trajectory messages (0 = horizon_step; at most half "
+           "the horizon)", 0.0, 2.5, read_only=True),
     double("horizon_stop", "sim s after the horizon over which its stepping dies out (alpha -> 0): where "
            "pid_node goes when this node is gone", 0.0, 10.0, read_only=True),
     double("rejoin_settle", "sim s a node that joined a running sim (realtime pacing) stands by before it "

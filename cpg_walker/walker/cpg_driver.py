@@ -170,7 +170,8 @@ class CPGDriver:
                  feedback_on: bool, fade: FeedbackFade, zeta: float, alpha: float, speed_map: SpeedMap,
                  cmd_vel_limits: CmdVelLimits, follow_cmd_vel: bool = True, lookahead: bool = True,
                  monitor_period_ns: int = 100_000_000, horizon_s: float = 0.0, horizon_stop_s: float = 0.0,
-                 horizon_step_ns: int = 40_000_000, rejoin_settle_ns: int = 0, lockstep: bool = False,
+                 horizon_step_ns: int = 40_000_000, horizon_period_ns: int = 0, rejoin_settle_ns: int = 0,
+                 lockstep: bool = False,
                  ankle_in_realtime: bool = False, ankle_for_side_step: bool = True,
                  sensor_wait_s: float = 0.4,
                  governor: GovernorConfig | None = None, wall: Callable[[], float] = time.monotonic,
@@ -190,6 +191,10 @@ class CPGDriver:
         self.lookahead, self.lockstep, self.sensor_wait_s = bool(lookahead), bool(lockstep), sensor_wait_s
         self.monitor_period_ns, self.rejoin_settle_ns = int(monitor_period_ns), int(rejoin_settle_ns)
         self.horizon_s, self.horizon_stop_s, self.horizon_step_ns = horizon_s, horizon_stop_s, horizon_step_ns
+        self.horizon_period_ns = int(horizon_period_ns) or horizon_step_ns  # between messages
+        if horizon_s > 0 and self.horizon_period_ns > horizon_s * 1e9 / 2:
+            raise ValueError(f"horizon_period ({self.horizon_period_ns / 1e9:g} s) must be at most half the "
+                             f"horizon ({horizon_s:g} s)")
         if horizon_s > 0 and round(horizon_s * 1e9 / horizon_step_ns) < 1:
             raise ValueError(f"horizon ({horizon_s} s) must be 0 or at least horizon_step")
         n_points = round((horizon_s + horizon_stop_s) * 1e9 / horizon_step_ns)
@@ -589,7 +594,7 @@ class CPGDriver:
         if self.horizon_points_ns is not None and self.control_period_ns is not None \
                 and t_ns >= self.next_horizon_ns:
             self._horizon(self.sent_ns, self.control_period_ns)
-            self.next_horizon_ns = t_ns + self.horizon_step_ns
+            self.next_horizon_ns = t_ns + self.horizon_period_ns
         if t_ns >= self.next_monitor_ns:
             self.stage = "walking" if t_ns >= self.walk_from_s * 1e9 else "starting"
             self._flush_monitor()  # a pending one first (no idle step since)
