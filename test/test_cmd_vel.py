@@ -348,11 +348,12 @@ def test_steering_steps_in_place_or_faster_and_slews_the_turn():
 @pytest.mark.slow
 def test_turning_in_place_reaches_the_commanded_rate_in_process():
     """The simulated robot, walking, gets angular.z 0.5 rad/s with linear.x 0 at 10 s: it steps in place
-    and turns at >= 0.5 rad/s (the issue's target) over 13-20 s (0.535 measured), moves < 3 cm/s, and
-    stays up."""
+    and turns at >= 0.5 rad/s (the issue's target) over 13-20 s (0.591 measured), >= 4 rad in the 10 s
+    from the command (the issue's must-show; 5.13 measured), moves < 3 cm/s, and stays up."""
     from cpg_walker.experiments.cmd_vel import Drive, run_drive
 
     m = run_drive(Drive("t", ((20.0, 0.0, 0.5),), windows=((13.0, 20.0),), tail_s=3.0))
     assert not m["fell"], m
     (seg,) = m["segments"]
     assert seg["turn_rate_rad_s"] >= 0.5 and abs(seg["speed_mps"]) < 0.03, seg
+    assert seg["whole"]["turned_rad"] >= 4.0, seg
