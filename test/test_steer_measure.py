@@ -10,7 +10,15 @@ import numpy as np
 import pytest
 
 from cpg_walker.experiments.cmd_vel_graph import STEER_PLAN, measure
-from cpg_walker.experiments.drive_protocol import AXES, froude, summarize, turn_scaled
+from cpg_walker.experiments.drive_protocol import (
+    AXES,
+    TURN_STARTS,
+    froude,
+    summarize,
+    turn_drives,
+    turn_scaled,
+    turn_summary,
+)
 
 
 def _odom(t0: float) -> np.ndarray:
@@ -60,3 +68,14 @@ def test_protocol_summary_picks_the_best_step_and_scales_by_froude():
     assert ours["turn_scaled"] == pytest.approx(0.5 * math.sqrt(0.25 / 9.81), abs=1e-3)
     assert froude(0.29, 0.2195) == pytest.approx(0.198, abs=1e-3)
     assert turn_scaled(2.47, 0.2195) == pytest.approx(0.369, abs=1e-3)
+
+
+def test_turn_in_place_from_each_instant_counts_falls_and_the_least_turned():
+    drives = turn_drives()
+    assert [d.t0 for d in drives] == list(TURN_STARTS) and len(set(TURN_STARTS)) == len(TURN_STARTS)
+    assert all(d.segments == ((d.t0 + 10.0, 0.0, 0.5),) and not d.ankle for d in drives)
+    runs = [{"fell": False, "segments": [{"whole": {"turned_rad": x}}]} for x in (4.2, 5.0, 4.6)]
+    runs.append({"fell": True, "segments": [{}]})
+    t = turn_summary(runs)
+    assert t["turned_rad"] == [4.2, 5.0, 4.6, None] and t["fell"] == 1
+    assert t["least_rad"] == 4.2 and t["mean_rad"] == pytest.approx(4.6)

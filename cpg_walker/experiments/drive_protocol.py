@@ -41,6 +41,11 @@ COMBINED: tuple[tuple[float, float, float], ...] = (
     (0.08, 0.0, 0.3), (0.08, 0.0, -0.3), (0.05, 0.0, 0.2), (-0.08, 0.0, 0.3), (0.05, 0.02, 0.0),
     (0.0, 0.02, 0.2))
 COMBINED_S = 30.0
+#: the must-show's turn in place (0.5 rad/s for 10 s) from the walk at each of these instants (sim s,
+#: 0.1 s apart: the gait's phase at the command varies as it does between realtime runs), without the ankle
+#: pathway as cpg_node in realtime
+TURN_STARTS = tuple(round(8.0 + 0.1 * k, 1) for k in range(20))
+TURN_RATE, TURN_S = 0.5, 10.0
 G = 9.81
 #: (robot, height m, leg length m, forward, backward, sideways m/s, turn rad/s). Speeds: Bestmann & Zhang
 #: 2022 (the issue's anchors). Leg lengths: hip pitch axis to sole, from the makers' kinematics (Darwin-OP:
@@ -81,6 +86,22 @@ def combined_drive(cmd: tuple[float, float, float]) -> Drive:
 
 def protocol_drives() -> list[Drive]:
     return [axis_drive(n) for n in AXES] + [combined_drive(c) for c in COMBINED]
+
+
+def turn_drives() -> list[Drive]:
+    """The turn in place from each of TURN_STARTS."""
+    return [Drive(f"turn in place from {t:g} s", ((t + TURN_S, 0.0, TURN_RATE),), t0=t, tail_s=2.0,
+                  ankle=False) for t in TURN_STARTS]
+
+
+def turn_summary(runs: list[dict]) -> dict:
+    """The angle each turn in place turned in its TURN_S (None where it fell), the least, the mean."""
+    turned = [None if r["fell"] else r["segments"][0]["whole"]["turned_rad"] for r in runs]
+    done = [x for x in turned if x is not None]
+    return {"rate_rad_s": TURN_RATE, "duration_s": TURN_S, "starts_s": list(TURN_STARTS),
+            "turned_rad": turned, "fell": sum(x is None for x in turned),
+            "least_rad": min(done) if done else None,
+            "mean_rad": round(sum(done) / len(done), 3) if done else None}
 
 
 def froude(v: float, leg_m: float) -> float:
@@ -153,14 +174,18 @@ def markdown(p: dict) -> str:
 
 def drive_check(out: str | Path, jobs: int = 2, quick: bool = False, map_file: str | None = None,
                 progress=None) -> dict:
-    """Run experiments/cmd_vel.py's ``drive_set`` and (not ``quick``) the steering protocol; write
-    DIR/drive_check.json (``runs``, ``protocol``), drive_check.md and drive_check.png."""
+    """Run experiments/cmd_vel.py's ``drive_set`` and (not ``quick``) the steering protocol and the turn in
+    place from TURN_STARTS; write DIR/drive_check.json (``runs``, ``protocol``, ``turn_in_place``),
+    drive_check.md and drive_check.png."""
     from functools import partial
 
     drives = drive_set(quick)
     extra = [] if quick else protocol_drives()
-    runs = run_many(partial(run_drive, map_file=map_file), drives + extra, jobs=jobs, progress=progress)
-    runs, proto_runs = runs[:len(drives)], runs[len(drives):]
+    turns = [] if quick else turn_drives()
+    runs = run_many(partial(run_drive, map_file=map_file), drives + extra + turns, jobs=jobs,
+                    progress=progress)
+    runs, proto_runs, turn_runs = (runs[:len(drives)], runs[len(drives):len(drives) + len(extra)],
+                                   runs[len(drives) + len(extra):])
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     res = {"limits": CmdVelLimits.load().as_dict(),
@@ -169,6 +194,12 @@ def drive_check(out: str | Path, jobs: int = 2, quick: bool = False, map_file: s
     if proto_runs:
         res["protocol"] = {**summarize(proto_runs, leg_length()), "runs": proto_runs}
         text += "\n" + markdown(res["protocol"])
+    if turn_runs:
+        t = res["turn_in_place"] = turn_summary(turn_runs)
+        text += (f"\nTurn in place at {t['rate_rad_s']:g} rad/s for {t['duration_s']:g} s from the walk at "
+                 f"{len(t['starts_s'])} instants {t['starts_s'][0]:g}–{t['starts_s'][-1]:g} s (without the "
+                 f"ankle pathway, as cpg_node in realtime): turned {t['least_rad']} rad at least, "
+                 f"{t['mean_rad']} on average; fell in {t['fell']}.\n")
     (out / "drive_check.json").write_text(json.dumps(res, indent=1) + "\n")
     (out / "drive_check.md").write_text(text)
     plot(runs, out / "drive_check.png")
