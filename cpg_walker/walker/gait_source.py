@@ -434,11 +434,7 @@ class FeedbackGaitSource(CPGGaitSource):
         q, qd = super().targets(t)
         if self._offsets_act() and t >= self.active_from:
             q, qd = q.copy(), qd.copy()
-            self._add_hip_yaw(q, qd, 0.0)
-            self._add_side_step(q, qd, 0.0)
-            q[ANKLE_PITCH] += self._ankle[0]
-            q[ANKLE_ROLL] += self._ankle[1]
-            q[HIP_ROLL] += self._free_leg
+            self._add_offsets(q, qd, 0.0, 1.0)
         return q, qd
 
     def forecast(self, times: np.ndarray, fade: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -455,23 +451,9 @@ class FeedbackGaitSource(CPGGaitSource):
             return q, qd
         ahead = np.maximum(times[rows] - self._t_net, 0.0)
         scale = np.ones(rows.size) if fade is None else np.asarray(fade, dtype=float).reshape(-1)[rows]
-        theta, w = self._reference_phase(0.0)
-        theta = theta + w * ahead
-        phi_td = touchdown_phase(self.ctrl.zeta, self.fb.cfg)
-        if self._yaw_u != 0.0:
-            dq, dqd = hip_yaw_offsets(scale * self._yaw_u, theta, phi_td, w)
-            q[np.ix_(rows, self._yaw_idx)] += dq
-            qd[np.ix_(rows, self._yaw_idx)] += dqd
-        if self._side_v != 0.0:
-            phase = theta + self.fb.cfg.side_step_phase_rad
-            dq, dqd = hip_yaw_offsets(scale * self._side_v, phase, phi_td, w)
-            for idx, sign in ((HIP_ROLL, 1.0), (ANKLE_ROLL, -1.0)):
-                q[np.ix_(rows, idx)] += sign * dq
-                qd[np.ix_(rows, idx)] += sign * dqd
-        hold = (scale * np.exp(-ahead / ANKLE_HOLD_S))[:, None]  # a reaction to now: it dies out ahead
-        q[np.ix_(rows, ANKLE_PITCH)] += hold * self._ankle[0]
-        q[np.ix_(rows, ANKLE_ROLL)] += hold * self._ankle[1]
-        q[np.ix_(rows, HIP_ROLL)] += hold * np.asarray(self._free_leg)[None]
+        qs, qds = q[rows], qd[rows]
+        self._add_offsets(qs, qds, ahead, scale)
+        q[rows], qd[rows] = qs, qds
         return q, qd
 
     def _offsets_act(self) -> bool:
@@ -486,24 +468,27 @@ class FeedbackGaitSource(CPGGaitSource):
         w = float(net.frequencies()[RIGHT_HIP2, 0])
         return phase(st[0, RIGHT_HIP2, 0], st[1, RIGHT_HIP2, 0]) + w * ahead_s, w
 
-    def _add_hip_yaw(self, q: np.ndarray, qd: np.ndarray, ahead_s: float, scale: float = 1.0) -> None:
-        if self._yaw_u == 0.0:
-            return
-        theta, w = self._reference_phase(ahead_s)
-        dq, dqd = hip_yaw_offsets(scale * self._yaw_u, theta, touchdown_phase(self.ctrl.zeta, self.fb.cfg), w)
-        q[self._yaw_idx] += dq
-        qd[self._yaw_idx] += dqd
+    def _add_offsets(self, q: np.ndarray, qd: np.ndarray, ahead_s, scale) -> None:
+        """Add the pathways' joint offsets to targets (q, q̇) ``ahead_s`` from now, scaled by ``scale``: one
+        row (25,) with scalars, or (K, 25) rows with (K,) arrays (a forecast at once).
 
-    def _add_side_step(self, q: np.ndarray, qd: np.ndarray, ahead_s: float, scale: float = 1.0) -> None:
-        """The side step: hip rolls q_R = −q_L = v·cos(θ − φ_TD + side_step_phase_rad), the ankle rolls
-        opposite (soles level)."""
-        if self._side_v == 0.0:
-            return
+        * heading: hip yaws q_R = −q_L = u·cos(θ − φ_TD) at the held u, θ advanced at the current rate;
+        * side step: hip rolls q_R = −q_L = v·cos(θ − φ_TD + side_step_phase_rad), the ankle rolls opposite
+          (soles level);
+        * ankle and free leg: the offsets of now, dying out ahead (a reaction to now)."""
         theta, w = self._reference_phase(ahead_s)
         cfg = self.fb.cfg
-        dq, dqd = hip_yaw_offsets(scale * self._side_v, theta + cfg.side_step_phase_rad,
-                                  touchdown_phase(self.ctrl.zeta, cfg), w)
-        q[HIP_ROLL] += dq
-        qd[HIP_ROLL] += dqd
-        q[ANKLE_ROLL] -= dq
-        qd[ANKLE_ROLL] -= dqd
+        phi_td = touchdown_phase(self.ctrl.zeta, cfg)
+        if self._yaw_u != 0.0:
+            dq, dqd = hip_yaw_offsets(scale * self._yaw_u, theta, phi_td, w)
+            q[..., self._yaw_idx] += dq
+            qd[..., self._yaw_idx] += dqd
+        if self._side_v != 0.0:
+            dq, dqd = hip_yaw_offsets(scale * self._side_v, theta + cfg.side_step_phase_rad, phi_td, w)
+            for idx, sign in ((HIP_ROLL, 1.0), (ANKLE_ROLL, -1.0)):
+                q[..., idx] += sign * dq
+                qd[..., idx] += sign * dqd
+        hold = np.asarray(scale * np.exp(-np.asarray(ahead_s) / ANKLE_HOLD_S))[..., None]
+        q[..., ANKLE_PITCH] += hold * self._ankle[0]
+        q[..., ANKLE_ROLL] += hold * self._ankle[1]
+        q[..., HIP_ROLL] += hold * np.asarray(self._free_leg)
