@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 
 import numpy as np
 import pytest
@@ -44,7 +45,8 @@ def toy_map(**over) -> dict:
 
 def test_packaged_map_inverse_round_trips_and_is_monotone():
     """config/speed_map.yaml: the inverse of the map's own speeds gives back (ζ, α); |v| at or above the
-    ζ = 1 speed is reached through ζ at α 1, below it through α at ζ 1; ζ and α rise with |v|."""
+    ζ = 1 speed is reached through ζ at α 1 up to the fastest such ζ, past it through the fast nodes (α > 1,
+    the ankle pathway's), below it through α at ζ 1; ζ and α rise with |v|."""
     m = SpeedMap.load()
     lim = CmdVelLimits.load()
     for branch, sign in ((m.forward, 1.0), (m.backward, -1.0)):
@@ -56,10 +58,13 @@ def test_packaged_map_inverse_round_trips_and_is_monotone():
         za = np.array([m.inverse(sign * v) for v in vs])
         assert np.all(np.diff(np.abs(za[:, 0])) >= -1e-12) and np.all(np.diff(za[:, 1]) >= -1e-12)
         assert np.all(np.sign(za[:, 0]) == sign)
-        fast = vs >= branch.speed[list(branch.c).index(1.0)]
-        assert np.all(za[fast, 1] == 1.0) and np.all(np.abs(za[~fast, 0]) == 1.0)
-    # the limits are what the map reaches (forward: below it, where the realtime graph's stop walked)
-    assert m.speed(1.3) - 1e-3 <= lim.max_linear_x <= m.v_max
+        quick = vs >= branch.speed[list(branch.c).index(1.0)]
+        longer = vs > branch.v_plain + 1e-12
+        assert np.all(za[quick & ~longer, 1] == 1.0) and np.all(np.abs(za[~quick, 0]) == 1.0)
+        assert len(branch.fast) and np.all(za[longer, 1] > 1.0)
+        assert np.abs(za[-1]) == pytest.approx(branch.fast[-1])  # the fastest node
+    # the limits are what the map reaches (forward: below it, beyond the speeds without the ankle pathway)
+    assert m.forward.v_plain < lim.max_linear_x <= m.v_max
     assert lim.min_linear_x == pytest.approx(m.v_min, abs=1e-3)
 
 
@@ -357,3 +362,33 @@ def test_turning_in_place_reaches_the_commanded_rate_in_process():
     (seg,) = m["segments"]
     assert seg["turn_rate_rad_s"] >= 0.5 and abs(seg["speed_mps"]) < 0.03, seg
     assert seg["whole"]["turned_rad"] >= 4.0, seg
+
+
+def test_fast_nodes_go_on_past_the_fastest_zeta_and_a_follower_without_them_stops_short():
+    """``fast_speed`` rows continue the chain past the fastest ζ at α 1 (linear between nodes, speed
+    monotone); ``command(..., fast=False)`` and a follower with ``allow_fast(False)`` stop at that ζ's
+    speed; malformed rows name the key."""
+    d = toy_map()
+    d["forward"]["fast_speed"] = [[1.6, 1.2, 0.13], [1.7, 1.4, 0.15]]
+    m = SpeedMap(d, "toy.yaml")
+    lim = limits(max_linear_x=0.15)
+    assert m.forward.v_plain == pytest.approx(0.11) and m.v_max == pytest.approx(0.15)
+    assert m.inverse(0.12) == pytest.approx((1.55, 1.1))  # half way to the first node
+    assert m.inverse(0.15) == pytest.approx((1.7, 1.4)) and m.command(0.2, lim) == pytest.approx((1.7, 1.4))
+    assert m.speed(1.6, 1.2) == pytest.approx(0.13) and m.speed(1.7, 1.0) == pytest.approx(0.11)
+    assert m.command(0.14, lim, fast=False) == pytest.approx((1.5, 1.0))
+    assert m.command(0.1, lim, fast=False) == m.command(0.1, lim)
+    f = CmdVelFollower(m, lim)
+    f.command(0.0, 0.14, 0.0)
+    assert f.target[:2] == pytest.approx((1.65, 1.3))
+    f.allow_fast(False)
+    assert f.target[:2] == pytest.approx((1.5, 1.0))
+    f.allow_fast(True)
+    assert f.target[0] > 1.5
+    for rows, why in (([[1.6, 0.9, 0.13]], "alpha must rise"), ([[1.4, 1.2, 0.13]], "alpha must rise"),
+                      ([[1.6, 1.2]], "[zeta, alpha, speed]"), ([[-1.6, 1.2, 0.13]], "must be > 0")):
+        bad = toy_map()
+        bad["forward"]["fast_speed"] = rows
+        with pytest.raises(ValueError, match=re.escape(why)) as err:
+            SpeedMap(bad, "toy.yaml")
+        assert "toy.yaml: forward.fast_speed" in str(err.value)

@@ -216,14 +216,15 @@ def test_the_ankle_pathway_acts_in_lockstep_or_when_allowed_in_realtime() -> Non
     assert all(abs(v) > 0.01 for v in (*offsets["allowed"], *offsets["lockstep"])), offsets
 
 
-def _tilted_ticks(d: CPGDriver, t0_ms: int, t1_ms: int, vy: float | None = None) -> list[bool]:
-    """Ticks from t0 to t1 with a rolling and pitching chest (and a /cmd_vel side step of ``vy`` every
-    0.1 s unless None); whether the ankle pathway was allowed at each."""
+def _tilted_ticks(d: CPGDriver, t0_ms: int, t1_ms: int, vy: float | None = None,
+                  vx: float = 0.0) -> list[bool]:
+    """Ticks from t0 to t1 with a rolling and pitching chest (and a /cmd_vel of ``vx`` forward and a side
+    step of ``vy`` every 0.1 s unless vy is None); whether the ankle pathway was allowed at each."""
     quat, gyro = np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.4, 0.3, 0.0])
     allowed = []
     for t in range(t0_ms * MS, t1_ms * MS, PERIOD):
         if vy is not None and t % (100 * MS) == 0:
-            d.twist(0.0, 0.0, vy)
+            d.twist(vx, 0.0, vy)
         d.sample(0, t, (quat, gyro))
         d.sample(1, t, 20.0)
         d.sample(2, t, 20.0)
@@ -249,6 +250,35 @@ def test_a_side_step_closes_the_ankle_pathway_in_realtime_while_it_lasts() -> No
             assert abs(d.source.fb.ankle_offsets()[0]) > 0.01
         allowed = _tilted_ticks(d, 14_000, 20_000)  # no more commands: the timeout, the amplitude winds down
         assert not d.source.side_stepping and not allowed[-1]
+
+
+def test_longer_steps_close_the_ankle_pathway_in_realtime_while_they_last() -> None:
+    """Outside lockstep, ``ankle_for_speed`` (the default) closes the ankle pathway for a /cmd_vel speed on
+    the speed map's fast nodes (steps longer than the plain envelope's) until the steps are short again
+    after it; the governor reaches them only once it is closed. Without it linear.x stops short of them
+    (ζ 1.5, α 1) and the pathway stays out."""
+    from cpg_walker.walker.governor import GovernorConfig
+
+    for for_speed in (True, False):
+        ctrl, settings = _setup()
+        d, _ = _make(ctrl, {**settings, "feedback_on": True, "horizon_s": 0.0,
+                            "governor": GovernorConfig.load(), "ankle_for_speed": for_speed})
+        assert not any(_tilted_ticks(d, 0, 8_000))
+        alphas, closed = [], []
+        for t0 in range(8_000, 24_000, 1_000):
+            allowed = _tilted_ticks(d, t0, t0 + 1_000, 0.0, 0.15)
+            alphas.append(d.ctrl.alpha_command)
+            closed.append(allowed[-1])
+            assert not (d.ctrl.alpha_command > 1.0 + 1e-9 and d.source.fb.ankle_fresh < 1.0)  # once closed
+        assert d.cmd.fast_allowed is for_speed
+        if for_speed:
+            assert d.cmd.target[0] > 1.5 and d.cmd.target[1] > 1.0
+        else:
+            assert d.cmd.target[:2] == pytest.approx((1.5, 1.0))
+        assert (max(alphas) > 1.3) is for_speed and closed[-1] is for_speed and any(closed) is for_speed
+        assert d.summary()["feedback"]["ankle_for_speed"] is for_speed
+        allowed = _tilted_ticks(d, 24_000, 34_000)  # no more commands: the timeout, the steps shorten
+        assert d.ctrl.alpha_command == 0.0 and not allowed[-1]
 
 
 def test_started_at_alpha_0_it_stands_without_the_recorded_opening_steps() -> None:

@@ -151,7 +151,7 @@ def test_the_declared_alpha_range_is_the_longest_step_that_walked():
     assert command_error("alpha", 1.2, CFG) is None and command_error("alpha", 1.3, None) is None
     assert "finite" in command_error("alpha", math.inf, CFG) and command_error("zeta", 2.5, CFG)
     packaged = GovernorConfig.load()
-    assert packaged.alpha_limit == max(a for env in (packaged.envelope, packaged.open_loop)
+    assert packaged.alpha_limit == max(a for env in (packaged.envelope, packaged.open_loop, packaged.ankle)
                                        for pts in (env.forward, env.backward) for _, a in pts)
 
 
@@ -175,3 +175,43 @@ def test_a_start_from_standing_ramps_to_the_envelope_and_the_walk_reports_it():
                transition="standing", governed=False)
     assert raw["fell"] and raw["applied_at_end"] == {"zeta": 0.5, "alpha": raw["applied_at_end"]["alpha"],
                                                      "governor": "off", "reason": ""}
+
+
+ANKLE = Envelope(forward=((0.3, 0.5), (0.7, 1.0), (1.5, 1.2), (1.7, 1.5)), backward=((0.3, 0.5), (1.5, 1.0)))
+CFG_ANKLE = GovernorConfig(ENV, ankle=ANKLE, fall_rate=0.5, ramp_rate=0.25, rise_rate=0.5, zeta_rate=0.5,
+                           reverse_alpha=0.05, reverse_zeta_tolerance=0.1)
+
+
+def _run_ankle(gov: Governor, cpg: Lagged, seconds: float, ankle: bool, pending: bool = False) -> list:
+    out = []
+    for _ in range(round(seconds / DT)):
+        z, a = gov.update(DT, cpg.zeta, cpg.alpha, ankle=ankle, ankle_pending=pending)
+        cpg.step(z, a)
+        out.append((z, a, cpg.zeta, cpg.alpha, gov.state))
+    return out
+
+
+def test_longer_steps_need_the_ankle_envelope_and_say_so():
+    """The ``ankle`` envelope (the ankle pathway closed) walks steps the plain one does not: a request in
+    it is reached with the ankle pathway, limited to the plain envelope without it, held where it is while
+    the pathway fades in; ``needs_ankle`` says when the request or the applied steps need it."""
+    gov, cpg = Governor(CFG_ANKLE, 1.5, 1.2), Lagged(1.5, 1.2)
+    assert not gov.needs_ankle(cpg.zeta, cpg.alpha)  # inside the plain envelope
+    gov.request(1.7, 1.5)
+    assert gov.needs_ankle(cpg.zeta, cpg.alpha)
+    held = _run_ankle(gov, cpg, 1.0, ankle=False, pending=True)
+    assert {s for *_, s in held} == {"waiting"} and "ankle" in gov.reason
+    assert max(abs(z - 1.5) for z, *_ in held) == 0.0 and max(abs(a - 1.2) for _, a, *_ in held) == 0.0
+    trace = _run_ankle(gov, cpg, 4.0, ankle=True)
+    assert trace[-1][:2] == (1.7, pytest.approx(1.5)) and gov.state == "following"
+    assert gov.needs_ankle(cpg.zeta, cpg.alpha)
+    gov.request(1.0, 1.0)  # back inside the plain envelope: needed while the applied steps are longer
+    assert gov.needs_ankle(cpg.zeta, cpg.alpha)
+    _run_ankle(gov, cpg, 6.0, ankle=True)
+    assert not gov.needs_ankle(cpg.zeta, cpg.alpha) and gov.state == "following"
+    plain, cpg = Governor(CFG_ANKLE, 1.5, 1.2), Lagged(1.5, 1.2)  # the ankle pathway never comes
+    plain.request(1.7, 1.5)
+    trace = _run_ankle(plain, cpg, 6.0, ankle=False)
+    assert trace[-1][1] == pytest.approx(ENV.alpha_max(1.7)) and plain.state == "limited"
+    assert not Governor(CFG, 1.5, 1.2).needs_ankle(1.5, 1.5)  # no ankle envelope: never
+    assert CFG_ANKLE.alpha_limit == 1.5

@@ -1,8 +1,9 @@
 """/cmd_vel driving measured in-process (walker/loop.py run_replay, through experiments/walk_runs.py):
 
-* ``measure_speed_map`` — the forward speed per ζ (α = 1) forward and backward, and per α at ζ = ±1,
-  each from standing, over the second half of a ``window_s`` window after the command: the data of
-  config/speed_map.yaml (``cpg-walker cmd-vel-map --out DIR`` writes DIR/speed_map.yaml + .json).
+* ``measure_speed_map`` — the forward speed per ζ (α = 1) forward and backward, per α at ζ = ±1, and at
+  the fast nodes (α > 1, with the ankle pathway), each from standing, over the second half of a
+  ``window_s`` window after the command: the data of config/speed_map.yaml (``cpg-walker cmd-vel-map
+  --out DIR`` writes DIR/speed_map.yaml + .json).
 * ``run_drive`` / ``drive_set`` (run by experiments/drive_protocol.py ``drive_check``) — Twist commands
   through walker/cmd_vel.py's CmdVelFollower (as cpg_node applies
   them), commanded vs actual forward speed and turn rate from the base trajectory (the in-process
@@ -27,6 +28,9 @@ from cpg_walker.walker.loop import heading_at
 #: The speed map's grid (ζ at α = 1; α at ζ = ±1), each walked from standing.
 MAP_ZETAS = tuple(s * z for s in (1, -1) for z in (0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4, 1.5))
 MAP_ALPHAS = (0.2, 0.4, 0.6, 0.8)
+#: The fast nodes (ζ, α > 1), walked with the ankle pathway (config/governor.yaml ``ankle``): the map's
+#: ``fast_speed`` (forward toward α 1.4 at ζ 1.7, 1.45 fell; backward α 1.3 at ζ −1.5, 1.4 at −1.6 fell).
+MAP_FAST = ((1.6, 1.2), (1.7, 1.4), (-1.5, 1.15), (-1.5, 1.3))
 MAP_WINDOW_S = 30.0
 
 
@@ -42,6 +46,8 @@ def map_specs(window_s: float = MAP_WINDOW_S) -> list[WalkSpec]:
              for z in MAP_ZETAS]
     specs += [WalkSpec(zeta=s, alpha=a, start="standing", duration_after_s=window_s,
                        label=f"alpha {a:g} zeta {s:g}") for s in (1.0, -1.0) for a in MAP_ALPHAS]
+    specs += [WalkSpec(zeta=z, alpha=a, start="standing", duration_after_s=window_s,
+                       label=f"fast {z:g}, {a:g}") for z, a in MAP_FAST]
     return specs
 
 
@@ -60,16 +66,16 @@ def measure_speed_map(out: str | Path, jobs: int = 2, window_s: float = MAP_WIND
     ok = [r for r in rows if not r["fell"] and r["error"] is None]
     doc = {"measured": {"command": "cpg-walker cmd-vel-map --out DIR", "start": "standing",
                         "window_s": window_s, "speed": "steady_speed_mps (second half of the window)"},
-           "slow_abs_zeta": 1.0,
-           "forward": {"zeta_speed": [[r["zeta"], r["steady_speed_mps"]] for r in ok
-                                      if r["alpha"] == 1.0 and r["zeta"] > 0],
-                       "alpha_speed": [[r["alpha"], r["steady_speed_mps"]] for r in ok
-                                       if r["alpha"] != 1.0 and r["zeta"] > 0]},
-           "backward": {"zeta_speed": [[r["zeta"], r["steady_speed_mps"]] for r in ok
-                                       if r["alpha"] == 1.0 and r["zeta"] < 0],
-                        "alpha_speed": [[r["alpha"], r["steady_speed_mps"]] for r in ok
-                                        if r["alpha"] != 1.0 and r["zeta"] < 0]},
-           "fell": [[r["zeta"], r["alpha"]] for r in rows if r["fell"] or r["error"]]}
+           "slow_abs_zeta": 1.0}
+    for key, sign in (("forward", 1.0), ("backward", -1.0)):
+        mine = [r for r in ok if r["zeta"] * sign > 0]
+        doc[key] = {"zeta_speed": [[r["zeta"], r["steady_speed_mps"]] for r in mine if r["alpha"] == 1.0],
+                    "alpha_speed": [[r["alpha"], r["steady_speed_mps"]] for r in mine if r["alpha"] < 1.0],
+                    "fast_speed": [[r["zeta"], r["alpha"], r["steady_speed_mps"]] for r in mine
+                                   if r["alpha"] > 1.0]}
+        if not doc[key]["fast_speed"]:
+            del doc[key]["fast_speed"]
+    doc["fell"] = [[r["zeta"], r["alpha"]] for r in rows if r["fell"] or r["error"]]
     import yaml
 
     (out / "speed_map.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))

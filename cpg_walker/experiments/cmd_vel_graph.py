@@ -31,7 +31,7 @@ PLAN = (("forward", 12.0, 0.085, 0.0, 4.0), ("left", 20.0, 0.085, 0.1, 8.0),
         ("right", 20.0, 0.085, -0.1, 8.0))
 #: Steering like a walking base: turn in place, side-step, then forward at (or clamped to) 0.15 m/s.
 STEER_PLAN = (("turn in place", 10.0, 0.0, 0.5, 3.0), ("side step", 20.0, 0.0, 0.0, 6.0, 0.05),
-              ("forward", 20.0, 0.15, 0.0, 8.0))
+              ("forward", 20.0, 0.15, 0.0, 13.0))
 PLANS = {"drive": PLAN, "steer": STEER_PLAN}
 STOP_S = 8.0
 #: A fresh graph: the first Twist at this sim time (the CPG has taken over the recording at ~6.6 s).

@@ -219,6 +219,9 @@ CPG = (
     boolean("ankle_for_side_step", "without ankle_in_realtime, a /cmd_vel side step closes the ankle "
             "pathway while it lasts (side steps need it; false: linear.y is refused outside lockstep)",
             read_only=True),
+    boolean("ankle_for_speed", "without ankle_in_realtime, a command of steps longer than the plain envelope "
+            "allows (the speed map's fast nodes, config/governor.yaml ankle:) closes the ankle pathway while "
+            "it lasts (false: /cmd_vel linear.x stops short of them outside lockstep)", read_only=True),
     boolean("feedback", "close the sensory feedback pathways (false: the open-loop CPG)"),
     double("sensor_timeout", "sim s without a newer /imu or /foot_load sample before feedback fades out",
            1e-3, 10.0),

@@ -7,7 +7,10 @@ the heading pathway's turn rate, a command timeout, and direction changes.
   fastest walkable ζ); below it -> α by interpolation of the measured speeds at ζ = ±1 (shorter steps at
   the learned rhythm; speed ≈ linear in α). Slower ζ than 1 are measured and recorded but not used:
   ζ 0.7 walks but 0.6 falls, and reversing into ζ −0.6 … −0.8 falls (docs/feedback.md, "Our pathways"), while
-  α 0.2 … 1 at ζ ±1 walks. Continuous in v (the branches meet at ζ = ±1, α = 1).
+  α 0.2 … 1 at ζ ±1 walks. Continuous in v (the branches meet at ζ = ±1, α = 1). Past the fastest ζ at
+  α 1, optional ``fast_speed`` nodes (ζ, α > 1, m/s) go on to longer steps: they walk only with the ankle
+  pathway (config/governor.yaml ``ankle``), so a follower that cannot close it stops short of them
+  (``CmdVelFollower.allow_fast``).
 * ``CmdVelFollower`` — a small state machine on sim time: ``command(t, linear_x, angular_z)`` and
   ``update(t, applied_zeta, applied_alpha)`` -> ``CmdVelOutput`` (ζ, α, turn rate to command). States:
   ``waiting`` (no command yet: None, the node keeps its parameters' ζ/α), ``following``, ``standing``
@@ -28,7 +31,7 @@ the heading pathway's turn rate, a command timeout, and direction changes.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -90,13 +93,17 @@ def monotone(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 @dataclass(frozen=True)
 class Branch:
     """One walking direction (``sign`` ±1) as one chain of "effort" c, s = slow_abs_zeta: c < s ->
-    (ζ = ±s, α = c / s), c >= s -> (ζ = ±c, α = 1), continuous at c = s. ``c`` and ``speed`` (|v|)
-    strictly increasing (the measured points made monotone by ``monotone``)."""
+    (ζ = ±s, α = c / s), s <= c <= top (the fastest ζ at α 1) -> (ζ = ±c, α = 1), continuous at c = s;
+    past ``top``, the fast nodes ``fast`` ((|ζ|, α) rows, α > 1, reached with the ankle pathway), linear in
+    c between them, c advancing by |Δζ| + |Δα| from (top, 1). ``c`` and ``speed`` (|v|) strictly
+    increasing (the measured points made monotone by ``monotone``)."""
 
     sign: float
     slow: float
     c: np.ndarray
     speed: np.ndarray
+    top: float = math.inf
+    fast: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def v_min(self) -> float:
@@ -106,8 +113,21 @@ class Branch:
     def v_max(self) -> float:
         return float(self.speed[-1])
 
+    @property
+    def v_plain(self) -> float:
+        """The fastest |v| without the fast nodes (ζ at ``top``, α 1)."""
+        return float(np.interp(self.top, self.c, self.speed)) if self.top < math.inf else self.v_max
+
+    def _fast_chain(self) -> tuple[np.ndarray, np.ndarray]:
+        """(c, (|ζ|, α)) of (top, 1) and the fast nodes."""
+        za = np.vstack([[self.top, 1.0], self.fast])
+        return self.top + np.concatenate([[0.0], np.cumsum(np.abs(np.diff(za, axis=0)).sum(axis=1))]), za
+
     def modulation(self, c: float) -> tuple[float, float]:
         """(ζ, α) of effort c."""
+        if c > self.top and len(self.fast):
+            cs, za = self._fast_chain()
+            return self.sign * float(np.interp(c, cs, za[:, 0])), float(np.interp(c, cs, za[:, 1]))
         if c >= self.slow:
             return self.sign * c, 1.0
         return self.sign * self.slow, c / self.slow
@@ -118,18 +138,22 @@ class Branch:
         return self.modulation(float(np.interp(s, self.speed, self.c)))
 
     def speed_at(self, zeta: float, alpha: float) -> float:
-        """The map's signed speed at (ζ, α) (α < 1 only at the slow ζ)."""
-        c = alpha * self.slow if alpha < 1.0 else abs(zeta)
+        """The map's signed speed at (ζ, α) (α < 1 only at the slow ζ; α > 1 on the fast nodes, by α)."""
+        if alpha > 1.0 and len(self.fast):
+            cs, za = self._fast_chain()
+            c = float(np.interp(alpha, za[:, 1], cs))
+        else:
+            c = alpha * self.slow if alpha < 1.0 else min(abs(zeta), self.top)
         return self.sign * float(np.interp(c, self.c, self.speed))
 
 
 class SpeedMap:
     """Measured speed vs (ζ, α) and its inverse (module docstring). ``load(path)``: a YAML with
-    ``slow_abs_zeta`` and ``forward`` / ``backward`` mappings of ``zeta_speed`` ([ζ, m/s] at α = 1) and
-    ``alpha_speed`` ([α, m/s] at ζ = ±slow_abs_zeta); anything else (how it was measured) is kept as
-    ``meta``. The measured points are made monotone (``monotone``: measurement noise can make ζ 1.4
-    slower than 1.3); bad data (wrong signs, ζ = ±slow_abs_zeta missing) raise ValueError naming the file
-    and key."""
+    ``slow_abs_zeta`` and ``forward`` / ``backward`` mappings of ``zeta_speed`` ([ζ, m/s] at α = 1),
+    ``alpha_speed`` ([α, m/s] at ζ = ±slow_abs_zeta) and optionally ``fast_speed`` ([ζ, α, m/s], α > 1);
+    anything else (how it was measured) is kept as ``meta``. The measured points are made monotone
+    (``monotone``: measurement noise can make ζ 1.4 slower than 1.3); bad data (wrong signs, ζ =
+    ±slow_abs_zeta missing) raise ValueError naming the file and key."""
 
     def __init__(self, data: dict, origin: str = "<dict>"):
         self.origin = origin
@@ -156,9 +180,39 @@ class SpeedMap:
         z = z[np.abs(z[:, 0]) >= s - 1e-9]
         if len(z) < 1 or abs(abs(z[0, 0]) - s) > 1e-9:
             raise InputError(f"{where}.zeta_speed: needs the point at zeta = {sign * s:g}")
+        top = float(abs(z[-1, 0]))
+        fast = self._fast(d, where, sign, top)
         c = np.concatenate([a[:, 0] * s, np.abs(z[:, 0])])
-        c, v = monotone(c, np.abs(np.concatenate([a[:, 1], z[:, 1]])))
-        return Branch(sign, s, c, v)
+        v = np.abs(np.concatenate([a[:, 1], z[:, 1]]))
+        if len(fast):
+            c = np.concatenate([c, Branch(sign, s, c, v, top, fast[:, :2])._fast_chain()[0][1:]])
+            v = np.concatenate([v, np.abs(fast[:, 2])])
+        c, v = monotone(c, v)
+        return Branch(sign, s, c, v, top, fast[:, :2])
+
+    @staticmethod
+    def _fast(d: dict, where: str, sign: float, top: float) -> np.ndarray:
+        """The optional ``fast_speed`` rows [ζ, α, m/s] (α > 1, |ζ| >= the fastest ζ at α 1, both not
+        decreasing, α rising), as (|ζ|, α, |v|)."""
+        if "fast_speed" not in d:
+            return np.zeros((0, 3))
+        v = d["fast_speed"]
+        try:
+            f = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"{where}.fast_speed: expected a list of [zeta, alpha, speed] rows, got {v!r}") \
+                from None
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) < 1 or not np.all(np.isfinite(f)):
+            raise InputError(f"{where}.fast_speed: expected a non-empty list of finite [zeta, alpha, speed] "
+                             f"rows, got {v!r}")
+        rel = "> 0" if sign > 0 else "< 0"
+        if np.any(np.sign(f[:, 0]) != sign) or np.any(np.sign(f[:, 2]) != sign):
+            raise InputError(f"{where}.fast_speed: every zeta and speed must be {rel}")
+        za = np.vstack([[top, 1.0], np.abs(f[:, :2])])
+        if np.any(np.diff(za[:, 0]) < 0) or np.any(np.diff(za[:, 1]) <= 0):
+            raise InputError(f"{where}.fast_speed: alpha must rise above 1 and |zeta| not fall below the "
+                             f"fastest zeta at alpha 1 ({top:g}), row by row")
+        return np.abs(f)
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> SpeedMap:
@@ -193,9 +247,13 @@ class SpeedMap:
         full = abs(self.speed(math.copysign(abs_zeta, v), 1.0))
         return min(abs(v) / full, 1.0) if full > 0 else 1.0
 
-    def command(self, linear_x: float, limits: CmdVelLimits) -> tuple[float, float]:
-        """(ζ, α) for a linear.x: clamped to the limits, |v| < stand_below -> (1 or −1 by sign, 0)."""
+    def command(self, linear_x: float, limits: CmdVelLimits, fast: bool = True) -> tuple[float, float]:
+        """(ζ, α) for a linear.x: clamped to the limits (without ``fast``, also to the speeds short of the
+        fast nodes), |v| < stand_below -> (1 or −1 by sign, 0)."""
         v = limits.clamp_linear(linear_x)
+        if not fast:
+            top = (self.forward if v > 0 else self.backward).v_plain
+            v = min(max(v, -top), top)
         if abs(v) < limits.stand_below:
             return (math.copysign(self.slow_abs_zeta, v) if v else self.slow_abs_zeta), 0.0
         return self.inverse(v)
@@ -332,6 +390,7 @@ class CmdVelFollower:
         self.target_y = 0.0
         self._turn_out = 0.0  # the turn rate output (slewed at limits.angular_z_rate[_in_place])
         self.side_step_allowed = True  # False: linear.y is taken as 0 (``allow_side_step``)
+        self.fast_allowed = True  # False: linear.x short of the speed map's fast nodes (``allow_fast``)
         self._reversing = False  # direction swapped, waiting for the applied ζ
         self.reverse_via_stop = True  # False: flip ζ at once (measured against; docs/cmd_vel.md)
         self.alpha_rate: float | None = None  # limit on every rise of the α command (per sim s); None: none
@@ -344,6 +403,14 @@ class CmdVelFollower:
         linear.y counts as 0 (a side step alone then stands)."""
         if bool(allowed) != self.side_step_allowed:
             self.side_step_allowed = bool(allowed)
+            if self.last is not None:
+                self._retarget()
+
+    def allow_fast(self, allowed: bool) -> None:
+        """Whether linear.x may reach the speed map's fast nodes (cpg_node: not without the ankle pathway);
+        refused, a faster linear.x walks at the fastest speed short of them."""
+        if bool(allowed) != self.fast_allowed:
+            self.fast_allowed = bool(allowed)
             if self.last is not None:
                 self._retarget()
 
@@ -379,7 +446,7 @@ class CmdVelFollower:
         lim = self.limits
         wz, vy = lim.clamp_angular(wz), lim.clamp_lateral(self.linear_y) if self.side_step_allowed else 0.0
         side = abs(vy) >= max(lim.stand_below, 1e-9)
-        z, a = self.map.command(vx, lim)
+        z, a = self.map.command(vx, lim, self.fast_allowed)
         if a == 0.0:
             z = self.zeta  # standing (or stepping in place): keep the walking direction
             if side or abs(wz) >= STEER_MIN_ANGULAR_Z:

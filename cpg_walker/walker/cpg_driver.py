@@ -164,7 +164,8 @@ class CPGDriver:
     ``wall``: the monotonic wall clock of the lockstep sensor wait. The ankle pathway acts only in
     ``lockstep`` or with ``ankle_in_realtime`` (its rate gains need a loop that waits for its samples);
     otherwise, with ``ankle_for_side_step``, while a /cmd_vel side step is commanded or still winding down
-    (side steps need it)."""
+    (side steps need it), and with ``ankle_for_speed`` while the governor wants it (steps longer than the
+    plain envelope's, the speed map's fast nodes: ``FeedbackGaitSource.needs_ankle``)."""
 
     def __init__(self, ctrl: HumanoidCPG, out: DriverOutput, *, feedback: FeedbackController,
                  feedback_on: bool, fade: FeedbackFade, zeta: float, alpha: float, speed_map: SpeedMap,
@@ -173,6 +174,7 @@ class CPGDriver:
                  horizon_step_ns: int = 40_000_000, horizon_period_ns: int = 0, rejoin_settle_ns: int = 0,
                  lockstep: bool = False,
                  ankle_in_realtime: bool = False, ankle_for_side_step: bool = True,
+                 ankle_for_speed: bool = True,
                  sensor_wait_s: float = 0.4,
                  governor: GovernorConfig | None = None, wall: Callable[[], float] = time.monotonic,
                  teacher: LiveTeacher | None = None, teach_steps: int = 2,
@@ -228,6 +230,7 @@ class CPGDriver:
         self.cmd_side = "ok"  # ok | why linear.y cannot side-step it
         self.ankle_allowed = self.lockstep or bool(ankle_in_realtime)
         self.ankle_for_side_step = bool(ankle_for_side_step)
+        self.ankle_for_speed = bool(ankle_for_speed)
         self._start(feedback)
 
     def _start(self, fb: FeedbackController) -> None:
@@ -356,12 +359,20 @@ class CPGDriver:
         self.cmd.command(t, float(linear_x), float(angular_z), float(linear_y))
 
     def _cmd_vel_tick(self, t_ns: int) -> None:
-        """The follower's output for tick t_ns, and the ankle pathway for a side step (class docstring)."""
+        """The follower's output for tick t_ns, and the ankle pathway for a side step or longer steps (class
+        docstring)."""
         self._follow_cmd_vel(t_ns)
-        fb = self.source.fb
+        src = self.source
         side = not self.cmd_override and self.cmd.side_step_commanded
-        fb.ankle_allowed = self.ankle_allowed or (self.ankle_for_side_step
-                                                  and (side or self.source.side_stepping))
+        src.fb.ankle_allowed = self.ankle_allowed or (self.ankle_for_side_step and (
+            side or src.side_stepping)) or (self.ankle_for_speed and src.needs_ankle)
+
+    def fast_available(self) -> bool:
+        """Whether the governor's ankle envelope (the speed map's fast nodes) can be reached: the ankle
+        pathway chosen and allowed here (lockstep, ankle_in_realtime) or closed for it (ankle_for_speed)."""
+        cfg = self.governor_config
+        return (cfg is not None and cfg.ankle is not None and self.feedback_on
+                and "ankle" in self.source.fb.pathways and (self.ankle_allowed or self.ankle_for_speed))
 
     def _follow_cmd_vel(self, t_ns: int) -> None:
         """Apply the follower's output for tick t_ns (once the CPG has taken over)."""
@@ -372,6 +383,7 @@ class CPGDriver:
         reason = turn_unavailable(self.feedback_on, self.fade.weight, fb.pathways)
         side = side_step_unavailable(reason, self.ankle_allowed, fb.pathways, self.ankle_for_side_step)
         self.cmd.allow_side_step(not side)
+        self.cmd.allow_fast(self.fast_available())
         out = self.cmd.update(t_ns / 1e9, self.ctrl.zeta, self.ctrl.alpha)
         if out is None:
             return
@@ -812,6 +824,7 @@ class CPGDriver:
                     "clock_dropped": c["clock_dropped"], "targets_withheld": c["targets_withheld"],
                     "sample_age": {**self.sample_ages, "max_s": round(self.sample_ages["max_s"], 4)},
                     "ankle_allowed": self.ankle_allowed, "ankle_for_side_step": self.ankle_for_side_step,
+                    "ankle_for_speed": self.ankle_for_speed,
                     "ankle_fresh": fb.ankle_fresh}
         return {**self.activity.summary(), "overruns": timing["overruns"], "tick": timing,
                 "feedback": feedback, "cmd_vel": self.cmd_vel_counts, "rejoined_at_s": self.rejoined_at_s,

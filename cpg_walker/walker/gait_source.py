@@ -194,6 +194,16 @@ class CPGGaitSource:
         """Feedback pathways will close at the takeover (the envelope of the start-up command)."""
         return False
 
+    def _ankle_state(self) -> tuple[bool, bool]:
+        """(The ankle pathway is closed at full weight: the governor's ``ankle`` envelope, it fades in)."""
+        return False, False
+
+    @property
+    def needs_ankle(self) -> bool:
+        """The governor wants the ankle pathway for the request or the applied steps (``needs_ankle``)."""
+        gov = self.governor
+        return gov is not None and gov.needs_ankle(self.ctrl.zeta, self.ctrl.alpha)
+
     def _governor(self, at: float | None = None) -> Governor | None:
         """The governor once the CPG has taken over (made then, from the commands as they stand): from
         the network's time, or ``at`` (a command due at the takeover goes through it too)."""
@@ -228,7 +238,7 @@ class CPGGaitSource:
         while self._t_net + 0.5 * self.h <= t:
             gov = self._governor()
             if gov is not None:
-                z, a = gov.update(self.h, ctrl.zeta, ctrl.alpha, self._open_loop())
+                z, a = gov.update(self.h, ctrl.zeta, ctrl.alpha, self._open_loop(), *self._ankle_state())
                 if z != ctrl.zeta_command:
                     ctrl.set_zeta(z)
                 if a != ctrl.alpha_command:
@@ -416,6 +426,11 @@ class FeedbackGaitSource(CPGGaitSource):
 
     def _closes_loop(self) -> bool:
         return bool(self.fb.pathways) and self.fb.weight > 0.0
+
+    def _ankle_state(self) -> tuple[bool, bool]:
+        fb = self.fb
+        on = "ankle" in fb.pathways and fb.ankle_allowed and not self._open_loop()
+        return on and fb.ankle_fresh >= 1.0, on and fb.ankle_fresh < 1.0
 
     def _open_loop(self) -> bool:
         """The pathways are not all closed at full weight (none chosen, fading, or not yet active)."""

@@ -10,6 +10,10 @@ What it does, each rule from a measured fall (config/governor.yaml says which):
   below the table's first point stands: α 0, while the oscillators keep turning at that first point's
   rhythm — near ζ 0 the learned network's phase relations drift: after 12 s at ζ 0.01 one DOF had moved
   1.6 rad from its place in the gait, and raising α 15 s after stepping off from there fell).
+* **Longer steps with the ankle pathway**: ``ankle`` (optional) is the envelope while the ankle pathway is
+  closed at full weight: the fast corner (α above 1 at |ζ| 1.5–1.7) walked only with it. ``needs_ankle``
+  says when the request (or the applied step length) lies beyond the plain envelope but within it — what
+  makes cpg_node close the ankle pathway in realtime (``ankle_for_speed``).
 * **Slowing down**: when the requested ζ allows less α than is applied, α comes down first (ζ held) and
   ζ follows once the applied α fits the new ζ's envelope. **Speeding up** the other way round: α rises
   only once the applied ζ is within ``reverse_zeta_tolerance`` of the new one (both rising together fell:
@@ -22,7 +26,7 @@ What it does, each rule from a measured fall (config/governor.yaml says which):
   at most ``zeta_rate`` per s within a direction. The CPG's own filters smooth what comes out.
 
 ``state`` says what it is doing (following | limited | slowing | accelerating | reversing | ramping |
-standing) and
+standing | waiting) and
 ``reason`` why the commanded values differ from the requested ones ('' when they do not).
 """
 
@@ -82,10 +86,12 @@ class Envelope:
 @dataclass(frozen=True)
 class GovernorConfig:
     """The governor's envelopes and rates (config/governor.yaml): ``envelope`` with the feedback pathways
-    closed, ``open_loop`` without them (None: the same)."""
+    closed, ``open_loop`` without them (None: the same), ``ankle`` with the ankle pathway closed too (None:
+    the same as ``envelope``)."""
 
     envelope: Envelope
     open_loop: Envelope | None = None
+    ankle: Envelope | None = None
     fall_rate: float = 0.5
     ramp_rate: float = 0.25
     rise_rate: float = 0.25
@@ -97,7 +103,7 @@ class GovernorConfig:
     def alpha_limit(self) -> float:
         """The top of the α range that walks: the largest α_max of the envelopes (longer steps fell at every
         ζ measured), at most the CPG's own limit."""
-        tops = [e.alpha_top for e in (self.envelope, self.open_loop) if e is not None]
+        tops = [e.alpha_top for e in (self.envelope, self.open_loop, self.ankle) if e is not None]
         return min(max(tops), ALPHA_RANGE[1])
 
     @classmethod
@@ -134,6 +140,7 @@ class GovernorConfig:
 
         closed = envelope("envelope")
         open_loop = envelope("open_loop") if "open_loop" in d else None
+        ankle = envelope("ankle") if "ankle" in d else None
 
         known = {"fall_rate", "ramp_rate", "rise_rate", "zeta_rate", "reverse_alpha",
                  "reverse_zeta_tolerance"}
@@ -143,7 +150,7 @@ class GovernorConfig:
         rates = {k: float(v) for k, v in d.items()}
         if any(not (math.isfinite(v) and v > 0) for v in rates.values()):
             raise InputError(f"{p}: rates and tolerances must be finite and > 0, got {rates}")
-        return cls(closed, open_loop, **rates)
+        return cls(closed, open_loop, ankle, **rates)
 
 
 @functools.cache
@@ -192,12 +199,30 @@ class Governor:
         self.requested = self.zeta, self.alpha = float(zeta), float(alpha)
         self.state, self.reason, self._ramping = "following", "", False
 
-    def update(self, dt: float, applied_zeta: float, applied_alpha: float,
-               open_loop: bool = False) -> tuple[float, float]:
-        """The (ζ, α) to command for the next ``dt`` s, given the CPG's applied (filtered) ζ and α;
-        ``open_loop``: the feedback pathways are not (fully) closed (the ``open_loop`` envelope)."""
+    def needs_ankle(self, applied_zeta: float, applied_alpha: float) -> bool:
+        """The ankle pathway is wanted: the request's step length, capped to the ``ankle`` envelope, is longer
+        than the plain envelope allows, or the applied one still is (winding down)."""
         cfg = self.cfg
-        env = cfg.open_loop if open_loop and cfg.open_loop is not None else cfg.envelope
+        if cfg.ankle is None:
+            return False
+        zr, ar = self.requested
+        want = zr != 0.0 and min(ar, cfg.ankle.alpha_max(zr)) > cfg.envelope.alpha_max(zr) + ALPHA_SLACK
+        return want or applied_alpha > cfg.envelope.alpha_max(applied_zeta) + ALPHA_SLACK
+
+    def update(self, dt: float, applied_zeta: float, applied_alpha: float, open_loop: bool = False,
+               ankle: bool = False, ankle_pending: bool = False) -> tuple[float, float]:
+        """The (ζ, α) to command for the next ``dt`` s, given the CPG's applied (filtered) ζ and α;
+        ``open_loop``: the feedback pathways are not (fully) closed (the ``open_loop`` envelope);
+        ``ankle``: they are, the ankle pathway too (the ``ankle`` envelope, if any); ``ankle_pending``:
+        the ankle pathway is fading in — a request that needs it waits, the steps as they are."""
+        cfg = self.cfg
+        if open_loop:
+            env = cfg.open_loop or cfg.envelope
+        else:
+            env = cfg.ankle if ankle and cfg.ankle is not None else cfg.envelope
+        if ankle_pending and not ankle and not open_loop and self.needs_ankle(applied_zeta, applied_alpha):
+            return self._set("waiting", "for the ankle pathway to close (the longer steps walk only with it)",
+                             self.zeta, min(self.alpha, env.alpha_max(self.zeta)), dt)
         zr, ar = self.requested
         too_slow = zr != 0.0 and abs(zr) < env.slowest(zr)
         if too_slow:  # it stands (α 0) with the oscillators at the slowest rhythm that steps (module doc)
