@@ -23,7 +23,10 @@ def test_a_walk_that_falls_exits_1_with_the_fall_on_the_last_line(tmp_path, caps
 def test_through_the_governor_the_step_length_is_refused_and_the_walkable_part_walks(tmp_path, capsys):
     status = main(["cpg-walk", *FAST_FALL, "--governor", "on", "--out", str(tmp_path / "refused")])
     err = capsys.readouterr().err.strip().splitlines()
-    assert status == 2 and len(err) == 1 and "--alpha: alpha must be in [0, 1], got 2.0" in err[0], err
+    from cpg_walker.walker.governor import GovernorConfig
+
+    top = GovernorConfig.load().alpha_limit  # the envelopes' longest step (1.4, with the ankle pathway)
+    assert status == 2 and len(err) == 1 and f"--alpha: alpha must be in [0, {top:g}], got 2.0" in err[0], err
     assert "longer steps fell at every zeta" in err[0]
     k = FAST_FALL.index("--alpha") + 1
     fast = [*FAST_FALL[:k], "1.0", *FAST_FALL[k + 1:]]

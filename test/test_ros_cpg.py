@@ -29,8 +29,11 @@ def test_modulation_parameters_validated_through_the_service(graph, probe):
     wrong = probe.set_param("cpg", "zeta", string("fast"))
     assert not wrong.successful and wrong.reason
     # the range tells the truth: a step longer than any that walked is refused, with the reason
-    longer = probe.set_param("cpg", "alpha", double(1.2))
-    assert not longer.successful and "alpha must be in [0, 1]" in longer.reason, longer.reason
+    from cpg_walker.walker.governor import GovernorConfig
+
+    top = GovernorConfig.load().alpha_limit  # 1.4: the ankle envelope's fast corner
+    longer = probe.set_param("cpg", "alpha", double(top + 0.1))
+    assert not longer.successful and f"alpha must be in [0, {top:g}]" in longer.reason, longer.reason
     assert "longer steps fell at every zeta" in longer.reason
     assert probe.set_param("cpg", "zeta", double(0.8)).successful
     assert probe.set_param("cpg", "alpha", double(0.7)).successful
