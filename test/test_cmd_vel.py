@@ -401,10 +401,11 @@ def test_the_fastest_command_walks_on_longer_steps_in_process():
     measured, 0.153 through the realtime graph); backward at the limit (-0.129, after the reversal) at
     least 0.12 m/s over 50-80 s (-0.132 measured, -0.128 realtime); each stops on the timeout upright."""
     from cpg_walker.experiments.cmd_vel import Drive, run_drive
+    from cpg_walker.experiments.walk_runs import run_many
 
-    for drive, fast in ((Drive("fast", ((50.0, 0.15, 0.0),), windows=((30.0, 50.0),), tail_s=6.0), 0.15),
-                        (Drive("back", ((80.0, -0.129, 0.0),), windows=((50.0, 80.0),), tail_s=6.0), -0.12)):
-        m = run_drive(drive)
+    drives = (Drive("fast", ((50.0, 0.15, 0.0),), windows=((30.0, 50.0),), tail_s=6.0),
+              Drive("back", ((80.0, -0.129, 0.0),), windows=((50.0, 80.0),), tail_s=6.0))
+    for m, fast in zip(run_many(run_drive, drives, jobs=2), (0.15, -0.12), strict=True):
         assert not m["fell"], m
         (seg,) = m["segments"]
         assert seg["alpha"] > 1.0 and seg["speed_mps"] * np.sign(fast) >= abs(fast), seg

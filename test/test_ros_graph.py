@@ -281,16 +281,19 @@ def test_bad_messages_never_reach_the_robot(graph, probe):
         pattern = rf"rejected /joint_targets: {re.escape(reason)}[^\n]*\((\d+) more since"
         return [int(n) for n in re.findall(pattern, pid.log())]
 
-    # every reason rejected, and rejected again after the throttle's period: a warning with a count
-    probe.wait(lambda: all(repeated(r) for r in reasons)
+    def throttled(reason: str) -> bool:
+        """The warnings of ``reason`` stand for more rejections than they are (counted in the repeats)."""
+        return sum(repeated(reason)) > pid.log().count(f"rejected /joint_targets: {reason}")
+
+    # every reason rejected, and rejected again after the throttle's period: warnings with counts, which
+    # (throttled per reason) stand for more rejections than there are warnings — however slowly the
+    # bad messages go out on a busy machine (a slow sender had 1 repeat behind 2 warnings)
+    probe.wait(lambda: all(throttled(r) for r in reasons)
                and "rejected /joint_torques: non-finite effort" in sim.log(),
                lambda: f"every rejection, repeated: {pid.log()[-1500:]}\n{sim.log()[-500:]}", each=send_bad)
     moved = [(stamp_ns(m), m.position[HEAD]) for _, m in probe.received[ifc.JOINT_STATES]
              if stamp_ns(m) >= bad_from and abs(m.position[HEAD] - rest) >= 0.02]
     assert not moved, moved[:10]  # the head stayed at rest all along
-    for reason in reasons:  # throttled per reason: the warnings stand for more rejections than they are
-        warnings = pid.log().count(f"rejected /joint_targets: {reason}")
-        assert sum(repeated(reason)) > warnings, (reason, warnings, repeated(reason))
     good = JointState(name=["head_joint_1"], position=[0.6])
     probe.wait(lambda: _settled(probe, 0.6, 0.05),  # the channel works: only bad input was dropped
                lambda: f"head settled at 0.6: {_head(probe)}", each=lambda: targets.publish(good))
