@@ -90,6 +90,13 @@ def monotone(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (np.array([b[0] / b[2] for b in blocks]), np.array([b[1] / b[2] for b in blocks]))
 
 
+def fast_chain(top: float, fast: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Effort c and (|ζ|, α) of (top, 1) followed by the fast nodes ``fast`` ((|ζ|, α) rows): c advances
+    by |Δζ| + |Δα| from ``top``."""
+    za = np.vstack([[top, 1.0], fast])
+    return top + np.concatenate([[0.0], np.cumsum(np.abs(np.diff(za, axis=0)).sum(axis=1))]), za
+
+
 @dataclass(frozen=True)
 class Branch:
     """One walking direction (``sign`` ±1) as one chain of "effort" c, s = slow_abs_zeta: c < s ->
@@ -118,15 +125,10 @@ class Branch:
         """The fastest |v| without the fast nodes (ζ at ``top``, α 1)."""
         return float(np.interp(self.top, self.c, self.speed)) if self.top < math.inf else self.v_max
 
-    def _fast_chain(self) -> tuple[np.ndarray, np.ndarray]:
-        """(c, (|ζ|, α)) of (top, 1) and the fast nodes."""
-        za = np.vstack([[self.top, 1.0], self.fast])
-        return self.top + np.concatenate([[0.0], np.cumsum(np.abs(np.diff(za, axis=0)).sum(axis=1))]), za
-
     def modulation(self, c: float) -> tuple[float, float]:
         """(ζ, α) of effort c."""
         if c > self.top and len(self.fast):
-            cs, za = self._fast_chain()
+            cs, za = fast_chain(self.top, self.fast)
             return self.sign * float(np.interp(c, cs, za[:, 0])), float(np.interp(c, cs, za[:, 1]))
         if c >= self.slow:
             return self.sign * c, 1.0
@@ -140,7 +142,7 @@ class Branch:
     def speed_at(self, zeta: float, alpha: float) -> float:
         """The map's signed speed at (ζ, α) (α < 1 only at the slow ζ; α > 1 on the fast nodes, by α)."""
         if alpha > 1.0 and len(self.fast):
-            cs, za = self._fast_chain()
+            cs, za = fast_chain(self.top, self.fast)
             c = float(np.interp(alpha, za[:, 1], cs))
         else:
             c = alpha * self.slow if alpha < 1.0 else min(abs(zeta), self.top)
@@ -185,7 +187,7 @@ class SpeedMap:
         c = np.concatenate([a[:, 0] * s, np.abs(z[:, 0])])
         v = np.abs(np.concatenate([a[:, 1], z[:, 1]]))
         if len(fast):
-            c = np.concatenate([c, Branch(sign, s, c, v, top, fast[:, :2])._fast_chain()[0][1:]])
+            c = np.concatenate([c, fast_chain(top, fast[:, :2])[0][1:]])
             v = np.concatenate([v, np.abs(fast[:, 2])])
         c, v = monotone(c, v)
         return Branch(sign, s, c, v, top, fast[:, :2])
