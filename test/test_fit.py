@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from cpg_walker.cli.main import main
@@ -71,6 +71,12 @@ def test_fit_missing_column_and_zero_oscillators(tmp_path, capsys):
     scale=st.floats(0.01, 100.0),
     periods=st.floats(8.0, 40.0),
 )
+# found by CI: learning stopped while the weak fifth harmonic still moved (4e-4 off: 17 % error over the
+# free run), and a 0.16-of-the-largest fifth harmonic had not locked within 300 internal seconds
+@example(base=28.0, harmonics=[2, 3, 5], amps=[1.9375, 1.125, 0.71875], phases=[3.25, 1.0, 0.875], offset=0.0,
+         scale=1.0, periods=8.0)
+@example(base=1.0, harmonics=[1, 2, 5], amps=[1.87, 1.625, 0.3], phases=[0.0, 2.0, 0.0], offset=0.0,
+         scale=1.0, periods=15.0)
 def test_random_multisines_learn_frequencies_and_waveform(base, harmonics, amps, phases, offset, scale,
                                                               periods):
     """Random multi-sines on harmonics 1-5 of a base frequency (so a component need not be a whole multiple
