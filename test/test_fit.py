@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, example, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from cpg_walker.cli.main import main
@@ -60,6 +60,10 @@ def test_fit_missing_column_and_zero_oscillators(tmp_path, capsys):
     assert "argument --oscillators: must be >= 1" in capsys.readouterr().err
 
 
+#: components at least this many periodogram bins 2π/T apart (T the record length) are told apart
+RESOLVED_BINS = 3.0
+
+
 @pytest.mark.slow
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
@@ -85,6 +89,9 @@ def test_random_multisines_learn_frequencies_and_waveform(base, harmonics, amps,
     hs = sorted(harmonics)
     w = base * np.array(hs, dtype=float)
     T = periods * 2 * np.pi / w.min()
+    # the plan's Hann periodogram merges components closer than ~2.25 bins 2π/T (harmonics 4 and 5 in 8
+    # periods of the 4th are 2 bins apart: one peak seen, the fit fails; docs/results.md): ask for 3
+    assume(np.all(np.diff(w) * T / (2 * np.pi) >= RESOLVED_BINS))
     t = np.linspace(0, T, int(T * w.max() / (2 * np.pi) * 40))
     v = offset + scale * sum(a * np.sin(wi * t + p) for a, wi, p in zip(amps, w, phases, strict=False))
     r = fit_signal(t, v, len(hs))
