@@ -317,7 +317,7 @@ def test_packaged_timeout_keeps_following_a_one_hertz_sender():
 
 def test_steering_steps_in_place_or_faster_and_slews_the_turn():
     """linear.x ~ 0 with a turn steps in place at (±steer_zeta, turn_alpha) in the walking direction, with
-    a linear.y at (±steer_zeta, steer_alpha); a turn faster than GENTLE_TURN (or a side step) while
+    a linear.y at (+steer_zeta, steer_alpha) (forward steps); a turn faster than GENTLE_TURN (or a side step) while
     walking steps at steer_zeta with the α that keeps the speed (``SpeedMap.alpha_at``); gentler turns
     keep the map's (ζ, α); linear.y is clamped to max_linear_y; the turn output moves at most
     angular_z_rate_in_place per sim s in place, angular_z_rate otherwise."""
@@ -328,7 +328,7 @@ def test_steering_steps_in_place_or_faster_and_slews_the_turn():
     f.command(0.0, 0.0, 0.4)
     assert f.target == (-1.5, 0.25, 0.15)  # backward walker: in place at ζ -1.5; turn clamped to 0.15
     f.command(0.05, 0.0, 0.4, 0.02)
-    assert f.target == (-1.5, 0.3, 0.15) and f.target_y == 0.02  # and a side step: steer_alpha
+    assert f.target == (1.5, 0.3, 0.15) and f.target_y == 0.02  # and a side step: forward, steer_alpha
     f = CmdVelFollower(m, limits(max_angular_z=0.5), zeta=1.0)
     f.command(0.0, 0.08, GENTLE_TURN)
     assert f.target == (*m.command(0.08, f.limits), GENTLE_TURN)
@@ -342,6 +342,15 @@ def test_steering_steps_in_place_or_faster_and_slews_the_turn():
     assert f.update(0.3, 1.5, 0.3) == CmdVelOutput(1.5, 0.3, 0.0, "stepping in place", 0.05)
     f.command(0.0, 0.0, 0.0)
     assert f.target_y == 0.0 and f.target[1] == 0.0  # standing: no side step
+    capped = CmdVelFollower(m, limits(side_step_max_alpha=0.4), zeta=1.0)
+    capped.command(0.0, 0.08, 0.0, 0.02)  # forward beside a side step: α at most side_step_max_alpha ...
+    assert capped.target == (1.5, 0.4, 0.0) and capped.target_y == 0.02
+    capped.command(0.1, 0.08, 0.0)  # ... and the map's (ζ, α) again without it
+    assert capped.target == (*m.command(0.08, capped.limits), 0.0)
+    capped.command(0.2, 0.02, 0.0, -0.02)  # slower steps are kept
+    assert capped.target == (1.5, 0.3, 0.0) and capped.target_y == -0.02
+    with pytest.raises(ValueError, match=r"side_step_max_alpha must be >= cmd_vel\.steer_alpha"):
+        limits(side_step_max_alpha=0.2)
     slow = CmdVelFollower(m, limits(max_angular_z=0.5, angular_z_rate_in_place=1.0, angular_z_rate=0.5),
                           zeta=1.0)
     slow.command(0.0, 0.0, 0.5)
@@ -409,3 +418,28 @@ def test_the_fastest_command_walks_on_longer_steps_in_process():
         assert not m["fell"], m
         (seg,) = m["segments"]
         assert seg["alpha"] > 1.0 and seg["speed_mps"] * np.sign(fast) >= abs(fast), seg
+
+
+@pytest.mark.slow
+def test_side_steps_walk_the_limit_left_right_and_beside_a_forward_walk_in_process():
+    """The simulated robot, walking, gets linear.y at the limit (0.05 m/s) from 10 s for 20 s: it moves
+    >= 0.8 m sideways each way (the issue's must-show; 0.96-1.0 m measured in-process, 1.04 m through the
+    realtime graph) without falling; beside linear.x 0.08 (α capped at side_step_max_alpha: 4 of 4 fell
+    uncapped at α 0.76) it walks both ways and stops on the timeout upright."""
+    from cpg_walker.experiments.cmd_vel import Drive, run_drive
+    from cpg_walker.experiments.walk_runs import run_many
+
+    lim = CmdVelLimits.load()
+    assert lim.max_linear_y >= 0.05
+    drives = (Drive("left", ((30.0, 0.0, 0.0, 0.05),), windows=((10.0, 30.0),), tail_s=6.0),
+              Drive("right", ((30.0, 0.0, 0.0, -0.05),), windows=((10.0, 30.0),), tail_s=6.0),
+              Drive("forward and left", ((40.0, 0.08, 0.0, 0.05),), windows=((10.0, 40.0),), tail_s=6.0))
+    left, right, both = run_many(run_drive, drives, jobs=2)
+    for m, sign in ((left, 1.0), (right, -1.0)):
+        assert not m["fell"], m
+        (seg,) = m["segments"]
+        assert seg["whole"]["sideways_m"] * sign >= 0.8, seg
+    assert not both["fell"], both
+    (seg,) = both["segments"]
+    assert seg["alpha"] == pytest.approx(lim.side_step_max_alpha, abs=0.02), seg
+    assert seg["whole"]["sideways_m"] >= 0.8 and seg["whole"]["forward_m"] >= 0.5, seg

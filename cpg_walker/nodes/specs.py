@@ -175,7 +175,7 @@ CPG_CMD_VEL_LIMITS = (
     double("cmd_vel.alpha_fall_rate", "the alpha command falls at most this much per sim s (a stop takes "
            "1/rate s)", 0.01, 100.0),
     double("cmd_vel.max_linear_y", "largest |linear.y| followed (m/s, sideways; larger is clamped; the "
-           "range: what walked, docs/steering.md)", 0.0, 0.034),
+           "range: what walked, docs/steering.md)", 0.0, 0.05),
     double("cmd_vel.steer_zeta", "|zeta| at least, while turning or side-stepping", 0.3, 2.0),
     double("cmd_vel.steer_alpha", "alpha at least, while turning or side-stepping (side-stepping in "
            "place: exactly)", 0.01, 1.0),
@@ -183,6 +183,9 @@ CPG_CMD_VEL_LIMITS = (
     double("cmd_vel.angular_z_rate", "the turn rate moves at most this much per sim s walking (rad/s^2)",
            0.01, 100.0),
     double("cmd_vel.angular_z_rate_in_place", "the same stepping in place (rad/s^2)", 0.01, 100.0),
+    double("cmd_vel.side_step_max_alpha", "alpha at most while side-stepping (at |zeta| = steer_zeta): "
+           "linear.x beside linear.y is followed up to the speed of those steps (the range: what walked, "
+           "docs/steering.md)", 0.01, 1.0),
 )
 
 CPG = (

@@ -41,7 +41,7 @@ from cpg_walker.errors import InputError
 #: keys of a CmdVelLimits (and of cpg_node's ``cmd_vel.<key>`` parameters)
 LIMIT_KEYS = ("timeout", "max_linear_x", "min_linear_x", "max_angular_z", "stand_below", "alpha_fall_rate",
               "max_linear_y", "steer_zeta", "steer_alpha", "turn_alpha", "angular_z_rate",
-              "angular_z_rate_in_place")
+              "angular_z_rate_in_place", "side_step_max_alpha")
 
 
 def _read_yaml(path: str | Path | None, default: str) -> tuple[dict, Path]:
@@ -281,6 +281,7 @@ class CmdVelLimits:
     turn_alpha: float = 0.25
     angular_z_rate: float = 0.3
     angular_z_rate_in_place: float = 1.0
+    side_step_max_alpha: float = 1.0  # α at most while side-stepping (the forward speed beside it)
 
     def __post_init__(self) -> None:
         for k in LIMIT_KEYS:
@@ -298,12 +299,16 @@ class CmdVelLimits:
             raise ValueError(f"cmd_vel.max_linear_y must be in [0, 0.2] m/s, got {self.max_linear_y}")
         if not 0.3 <= self.steer_zeta <= 2.0:
             raise ValueError(f"cmd_vel.steer_zeta must be in [0.3, 2], got {self.steer_zeta}")
-        for k in ("steer_alpha", "turn_alpha"):
+        for k in ("steer_alpha", "turn_alpha", "side_step_max_alpha"):
             if not 0 < getattr(self, k) <= 1.0:
                 raise ValueError(f"cmd_vel.{k} must be in (0, 1], got {getattr(self, k)}")
         for k in ("angular_z_rate", "angular_z_rate_in_place"):
             if not getattr(self, k) > 0:
                 raise ValueError(f"cmd_vel.{k} must be > 0 rad/s^2, got {getattr(self, k)}")
+        if self.side_step_max_alpha < self.steer_alpha:
+            raise ValueError(f"cmd_vel.side_step_max_alpha must be >= cmd_vel.steer_alpha (a side step "
+                             f"in place steps at steer_alpha), got {self.side_step_max_alpha} < "
+                             f"{self.steer_alpha}")
         if not self.stand_below >= 0:
             raise ValueError(f"cmd_vel.stand_below must be >= 0, got {self.stand_below}")
         if not self.alpha_fall_rate > 0:
@@ -442,21 +447,28 @@ class CmdVelFollower:
         """The target (ζ, α, turn rate) and sideways speed of the last Twist. A turn faster than
         GENTLE_TURN, or a sideways speed of at least stand_below, steps at |ζ| >= steer_zeta and α >=
         steer_alpha, its forward speed kept by the α at that ζ (``SpeedMap.alpha_at``); with |linear.x|
-        below stand_below a side step steps in place at (±steer_zeta, steer_alpha), a turn alone of at least
-        STEER_MIN_ANGULAR_Z at (±steer_zeta, turn_alpha). Gentler turns walk at the speed map's (ζ, α)."""
+        below stand_below a side step steps in place at (+steer_zeta, steer_alpha) (forward steps: a
+        backward walker reverses first), a turn alone of at least STEER_MIN_ANGULAR_Z at (±steer_zeta,
+        turn_alpha) in the walking direction. Gentler turns walk at the speed map's (ζ, α).
+        Beside a side step α is at most side_step_max_alpha (at ±steer_zeta): linear.x is followed only
+        up to the speed of those steps."""
         _, vx, wz = self.last  # type: ignore[misc]
         lim = self.limits
         wz, vy = lim.clamp_angular(wz), lim.clamp_lateral(self.linear_y) if self.side_step_allowed else 0.0
         side = abs(vy) >= max(lim.stand_below, 1e-9)
         z, a = self.map.command(vx, lim, self.fast_allowed)
         if a == 0.0:
-            z = self.zeta  # standing (or stepping in place): keep the walking direction
-            if side or abs(wz) >= STEER_MIN_ANGULAR_Z:
-                z, a = math.copysign(lim.steer_zeta, z), lim.steer_alpha if side else lim.turn_alpha
+            z = self.zeta  # standing (or stepping in place): keep the walking direction ...
+            if side:  # ... but a side step steps forward (with backward steps it barely moved sideways)
+                z, a = lim.steer_zeta, lim.steer_alpha
+            elif abs(wz) >= STEER_MIN_ANGULAR_Z:
+                z, a = math.copysign(lim.steer_zeta, z), lim.turn_alpha
         elif (side or abs(wz) > GENTLE_TURN) and abs(z) < lim.steer_zeta:
             v = lim.clamp_linear(vx)
             z = math.copysign(lim.steer_zeta, v)
             a = max(self.map.alpha_at(v, lim.steer_zeta), lim.steer_alpha)
+        if side and a > lim.side_step_max_alpha:  # longer steps beside a side step fell: walk slower
+            z, a = math.copysign(lim.steer_zeta, z), lim.side_step_max_alpha
         self.target = (z, a, wz if a > 0 else 0.0)
         self.target_y = vy if a > 0 else 0.0
 

@@ -142,6 +142,7 @@ class FeedbackConfig:
     side_step_limit_rad: float  # |amplitude| clip
     side_step_phase_rad: float  # the oscillation's phase after the heading pathway's cos(θ − φ_TD)
     side_step_rate: float  # rad per sim s the amplitude moves at most
+    side_step_ankle_ratio: float  # ankle rolls = −this × the hip rolls' oscillation (1: soles kept level)
     heading_time_constant_s: float  # low-pass on the heading error (the gait's own yaw sway)
     heading_reference: str  # "handover": the yaw when feedback takes over | "start": the first observed yaw
     # ours ("ankle"): both ankles' pitch/roll target offsets from the chest's tilt and angular velocity
@@ -201,6 +202,9 @@ class FeedbackConfig:
         if not 0.0 <= self.side_step_limit_rad <= 0.3:
             raise InputError(f"side_step_limit_rad must be in [0, 0.3] rad (hip-roll offsets), "
                              f"got {self.side_step_limit_rad}")
+        if not 0.0 <= self.side_step_ankle_ratio <= 1.0:
+            raise InputError(f"side_step_ankle_ratio must be in [0, 1] (1: soles kept level), "
+                             f"got {self.side_step_ankle_ratio}")
         if abs(self.side_step_phase_rad) > math.pi:
             raise InputError(f"side_step_phase_rad must be in [-pi, pi], got {self.side_step_phase_rad}")
         for name in ("heading_limit_rad", "hip_yaw_limit_rad"):
