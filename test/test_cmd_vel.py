@@ -317,9 +317,9 @@ def test_packaged_timeout_keeps_following_a_one_hertz_sender():
 
 def test_steering_steps_in_place_or_faster_and_slews_the_turn():
     """linear.x ~ 0 with a turn steps in place at (±steer_zeta, turn_alpha) in the walking direction, with
-    a linear.y at (+steer_zeta, steer_alpha) (forward steps); a turn faster than GENTLE_TURN (or a side step) while
-    walking steps at steer_zeta with the α that keeps the speed (``SpeedMap.alpha_at``); gentler turns
-    keep the map's (ζ, α); linear.y is clamped to max_linear_y; the turn output moves at most
+    a linear.y at (+steer_zeta, steer_alpha) (forward steps); a turn faster than GENTLE_TURN (or a side
+    step) while walking steps at steer_zeta with the α that keeps the speed (``SpeedMap.alpha_at``);
+    gentler turns keep the map's (ζ, α); linear.y is clamped to max_linear_y; the turn output moves at most
     angular_z_rate_in_place per sim s in place, angular_z_rate otherwise."""
     from cpg_walker.walker.cmd_vel import GENTLE_TURN
 
