@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from cpg_walker.cpg.hopf import phase as oscillator_phase
+from cpg_walker.errors import InputError
 from cpg_walker.paths import config_path
 from cpg_walker.robot.contact import TouchdownDetector
 from cpg_walker.robot.hoap2 import tilt_from_quat
@@ -216,3 +217,26 @@ def test_walk_with_feedback_zeta1_does_not_fall(ctrl):
     assert not m["fell"]
     assert m["phase_resets"] >= 5
     assert m["distance_m"] > 1.5
+
+
+def test_side_step_soles_tilt_in_place_and_level_turning_or_on_longer_steps():
+    """The side step's ankle-roll ratio: side_step_ankle_ratio (0: soles tilted with the legs) stepping in
+    place at α 0.3 without a turn; 1 (soles level) from |turn rate| side_step_level_turn_rad_s or from α
+    side_step_level_alpha_to on, linear in between; bad values are refused with the field's name."""
+    import dataclasses
+
+    cfg = FeedbackConfig.load()
+    fc = FeedbackController(cfg)
+    lo, hi = cfg.side_step_level_alpha_from, cfg.side_step_level_alpha_to
+    assert fc.side_step_ankle_ratio(0.3) == cfg.side_step_ankle_ratio == 0.0
+    assert fc.side_step_ankle_ratio(hi) == fc.side_step_ankle_ratio(1.0) == 1.0
+    assert fc.side_step_ankle_ratio((lo + hi) / 2) == pytest.approx(0.5)
+    fc.turn_rate = -0.5 * cfg.side_step_level_turn_rad_s
+    assert fc.side_step_ankle_ratio(0.3) == pytest.approx(0.5)
+    fc.turn_rate = 2 * cfg.side_step_level_turn_rad_s
+    assert fc.side_step_ankle_ratio(0.3) == 1.0
+    for bad, field in (({"side_step_ankle_ratio": 1.5}, "side_step_ankle_ratio"),
+                       ({"side_step_level_alpha_from": 0.5}, "side_step_level_alpha_from"),
+                       ({"side_step_level_turn_rad_s": 0.0}, "side_step_level_turn_rad_s")):
+        with pytest.raises(InputError, match=field):
+            dataclasses.replace(cfg, **bad)

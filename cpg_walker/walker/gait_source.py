@@ -489,7 +489,7 @@ class FeedbackGaitSource(CPGGaitSource):
 
         * heading: hip yaws q_R = −q_L = u·cos(θ − φ_TD) at the held u, θ advanced at the current rate;
         * side step: hip rolls q_R = −q_L = v·cos(θ − φ_TD + side_step_phase_rad), the ankle rolls
-          −side_step_ankle_ratio times that (1: soles level; 0: the soles tilt with the legs);
+          −FeedbackController.side_step_ankle_ratio() times that (1: soles level; 0: they tilt with the legs);
         * ankle and free leg: the offsets of now, dying out ahead (a reaction to now)."""
         theta, w = self._reference_phase(ahead_s)
         cfg = self.fb.cfg
@@ -500,7 +500,7 @@ class FeedbackGaitSource(CPGGaitSource):
             qd[..., self._yaw_idx] += dqd
         if self._side_v != 0.0:
             dq, dqd = hip_yaw_offsets(scale * self._side_v, theta + cfg.side_step_phase_rad, phi_td, w)
-            for idx, sign in ((HIP_ROLL, 1.0), (ANKLE_ROLL, -cfg.side_step_ankle_ratio)):
+            for idx, sign in ((HIP_ROLL, 1.0), (ANKLE_ROLL, -self.fb.side_step_ankle_ratio(self.ctrl.alpha))):
                 q[..., idx] += sign * dq
                 qd[..., idx] += sign * dqd
         hold = np.asarray(scale * np.exp(-np.asarray(ahead_s) / ANKLE_HOLD_S))[..., None]
