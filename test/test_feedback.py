@@ -221,22 +221,29 @@ def test_walk_with_feedback_zeta1_does_not_fall(ctrl):
 
 def test_side_step_soles_tilt_in_place_and_level_turning_or_on_longer_steps():
     """The side step's ankle-roll ratio: side_step_ankle_ratio (0: soles tilted with the legs) stepping in
-    place at α 0.3 without a turn; 1 (soles level) from |turn rate| side_step_level_turn_rad_s or from α
-    side_step_level_alpha_to on, linear in between; bad values are refused with the field's name."""
+    place at α 0.3 without a turn at a full amplitude; 1 (soles level) below side_step_tilt_from_rad, from
+    |turn rate| side_step_level_turn_rad_s or from α side_step_level_alpha_to on, linear in between; bad
+    values are refused with the field's name."""
     import dataclasses
 
     cfg = FeedbackConfig.load()
     fc = FeedbackController(cfg)
     lo, hi = cfg.side_step_level_alpha_from, cfg.side_step_level_alpha_to
-    assert fc.side_step_ankle_ratio(0.3) == cfg.side_step_ankle_ratio == 0.0
-    assert fc.side_step_ankle_ratio(hi) == fc.side_step_ankle_ratio(1.0) == 1.0
-    assert fc.side_step_ankle_ratio((lo + hi) / 2) == pytest.approx(0.5)
+    a0, a1 = cfg.side_step_tilt_from_rad, cfg.side_step_tilt_full_rad
+    full = cfg.side_step_limit_rad
+    assert a1 <= full
+    assert fc.side_step_ankle_ratio(0.3, full) == fc.side_step_ankle_ratio(0.3, -a1) == 0.0
+    assert fc.side_step_ankle_ratio(0.3, a0) == fc.side_step_ankle_ratio(0.3, -0.05) == 1.0
+    assert fc.side_step_ankle_ratio(0.3, (a0 + a1) / 2) == pytest.approx(0.5)
+    assert fc.side_step_ankle_ratio(hi, full) == fc.side_step_ankle_ratio(1.0, full) == 1.0
+    assert fc.side_step_ankle_ratio((lo + hi) / 2, full) == pytest.approx(0.5)
     fc.turn_rate = -0.5 * cfg.side_step_level_turn_rad_s
-    assert fc.side_step_ankle_ratio(0.3) == pytest.approx(0.5)
+    assert fc.side_step_ankle_ratio(0.3, full) == pytest.approx(0.5)
     fc.turn_rate = 2 * cfg.side_step_level_turn_rad_s
-    assert fc.side_step_ankle_ratio(0.3) == 1.0
+    assert fc.side_step_ankle_ratio(0.3, full) == 1.0
     for bad, field in (({"side_step_ankle_ratio": 1.5}, "side_step_ankle_ratio"),
                        ({"side_step_level_alpha_from": 0.5}, "side_step_level_alpha_from"),
+                       ({"side_step_tilt_from_rad": 0.2}, "side_step_tilt_from_rad"),
                        ({"side_step_level_turn_rad_s": 0.0}, "side_step_level_turn_rad_s")):
         with pytest.raises(InputError, match=field):
             dataclasses.replace(cfg, **bad)

@@ -145,7 +145,9 @@ class FeedbackConfig:
     side_step_ankle_ratio: float  # ankle rolls = −this × the hip rolls' oscillation (1: soles kept level)
     side_step_level_turn_rad_s: float  # ... rising to 1 (soles level) as |turn rate| reaches this ...
     side_step_level_alpha_from: float  # ... and as the applied α rises from this ...
-    side_step_level_alpha_to: float  # ... to this
+    side_step_level_alpha_to: float  # ... to this; and below these amplitudes (rad): level under
+    side_step_tilt_from_rad: float  # this, tilted (side_step_ankle_ratio) from ...
+    side_step_tilt_full_rad: float  # ... this on, linear in between
     heading_time_constant_s: float  # low-pass on the heading error (the gait's own yaw sway)
     heading_reference: str  # "handover": the yaw when feedback takes over | "start": the first observed yaw
     # ours ("ankle"): both ankles' pitch/roll target offsets from the chest's tilt and angular velocity
@@ -209,6 +211,10 @@ class FeedbackConfig:
         if not 0.0 <= lo < hi <= 2.0:
             raise InputError(f"side_step_level_alpha_from must be below side_step_level_alpha_to, both in "
                              f"[0, 2]; got {lo} / {hi}")
+        if not 0.0 <= self.side_step_tilt_from_rad < self.side_step_tilt_full_rad <= 0.3:
+            raise InputError(f"side_step_tilt_from_rad must be below side_step_tilt_full_rad, both in "
+                             f"[0, 0.3] rad; got {self.side_step_tilt_from_rad} / "
+                             f"{self.side_step_tilt_full_rad}")
         if not self.side_step_level_turn_rad_s > 0.0:
             raise InputError(f"side_step_level_turn_rad_s must be > 0 rad/s, "
                              f"got {self.side_step_level_turn_rad_s}")
@@ -419,17 +425,22 @@ class FeedbackController:
         self.loads = (0.0, 0.0)  # (left, right) sole loads of the last observe (N)
         self.resets: list[tuple[float, float]] = []  # (t, Δ rad)
 
-    def side_step_ankle_ratio(self, alpha: float) -> float:
-        """The side step's ankle-roll ratio at the applied α: ``side_step_ankle_ratio`` stepping in place
-        without a turn, rising linearly to 1 (soles level) as the commanded |turn rate| reaches
+    def side_step_ankle_ratio(self, alpha: float, amplitude: float) -> float:
+        """The side step's ankle-roll ratio at the applied α and the side step's hip-roll ``amplitude``
+        (rad): ``side_step_ankle_ratio`` stepping in place at an amplitude of at least
+        ``side_step_tilt_full_rad`` without a turn, 1 (soles level) below ``side_step_tilt_from_rad``
+        (linear between: on tilted soles 0.11-0.16 rad yawed the base by −0.06 rad/s, 0.175 and more
+        did not), rising linearly to 1 as the commanded |turn rate| reaches
         ``side_step_level_turn_rad_s`` (on tilted soles a turn beside a side step slipped: 2.9 rad in 30 s
         at 0.2 rad/s, 6.5 level) or as α rises (forward steps beside a side
         step on tilted soles yawed the base at −0.063 rad/s, level at 0.016-0.020): from
         ``side_step_level_alpha_from`` to ``side_step_level_alpha_to``."""
         c = self.cfg
         lo, hi = c.side_step_level_alpha_from, c.side_step_level_alpha_to
+        a0, a1 = c.side_step_tilt_from_rad, c.side_step_tilt_full_rad
+        tilt = (abs(amplitude) - a0) / (a1 - a0)
         k = max(min(abs(self.turn_rate) / c.side_step_level_turn_rad_s, 1.0),
-                min(max((alpha - lo) / (hi - lo), 0.0), 1.0))
+                min(max((alpha - lo) / (hi - lo), 0.0), 1.0), 1.0 - min(max(tilt, 0.0), 1.0))
         return c.side_step_ankle_ratio + (1.0 - c.side_step_ankle_ratio) * k
 
     # ---- run-time settings

@@ -500,7 +500,8 @@ class FeedbackGaitSource(CPGGaitSource):
             qd[..., self._yaw_idx] += dqd
         if self._side_v != 0.0:
             dq, dqd = hip_yaw_offsets(scale * self._side_v, theta + cfg.side_step_phase_rad, phi_td, w)
-            for idx, sign in ((HIP_ROLL, 1.0), (ANKLE_ROLL, -self.fb.side_step_ankle_ratio(self.ctrl.alpha))):
+            ratio = self.fb.side_step_ankle_ratio(self.ctrl.alpha, self._side_v)
+            for idx, sign in ((HIP_ROLL, 1.0), (ANKLE_ROLL, -ratio)):
                 q[..., idx] += sign * dq
                 qd[..., idx] += sign * dqd
         hold = np.asarray(scale * np.exp(-np.asarray(ahead_s) / ANKLE_HOLD_S))[..., None]
