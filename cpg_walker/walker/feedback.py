@@ -142,12 +142,13 @@ class FeedbackConfig:
     side_step_limit_rad: float  # |amplitude| clip
     side_step_phase_rad: float  # the oscillation's phase after the heading pathway's cos(θ − φ_TD)
     side_step_rate: float  # rad per sim s the amplitude moves at most
-    side_step_ankle_ratio: float  # ankle rolls = −this × the hip rolls' oscillation (1: soles kept level)
-    side_step_level_turn_rad_s: float  # ... rising to 1 (soles level) as |turn rate| reaches this ...
-    side_step_level_alpha_from: float  # ... and as the applied α rises from this ...
-    side_step_level_alpha_to: float  # ... to this; and below these amplitudes (rad): level under
-    side_step_tilt_from_rad: float  # this, tilted (side_step_ankle_ratio) from ...
-    side_step_tilt_full_rad: float  # ... this on, linear in between
+    # side step ankle rolls = −ratio × its hip rolls (1: soles level): see side_step_ankle_ratio()
+    side_step_ankle_ratio: float  # the ratio of a full side step in place
+    side_step_level_turn_rad_s: float  # level (ratio 1) from this |turn rate| on
+    side_step_level_alpha_from: float  # levelling as the applied α rises from this ...
+    side_step_level_alpha_to: float  # ... to this
+    side_step_tilt_from_rad: float  # level below this hip-roll amplitude (rad) ...
+    side_step_tilt_full_rad: float  # ... fully tilted from this on
     heading_time_constant_s: float  # low-pass on the heading error (the gait's own yaw sway)
     heading_reference: str  # "handover": the yaw when feedback takes over | "start": the first observed yaw
     # ours ("ankle"): both ankles' pitch/roll target offsets from the chest's tilt and angular velocity
@@ -426,22 +427,18 @@ class FeedbackController:
         self.resets: list[tuple[float, float]] = []  # (t, Δ rad)
 
     def side_step_ankle_ratio(self, alpha: float, amplitude: float) -> float:
-        """The side step's ankle-roll ratio at the applied α and the side step's hip-roll ``amplitude``
-        (rad): ``side_step_ankle_ratio`` stepping in place at an amplitude of at least
-        ``side_step_tilt_full_rad`` without a turn, 1 (soles level) below ``side_step_tilt_from_rad``
-        (linear between: on tilted soles 0.11-0.16 rad yawed the base by −0.06 rad/s, 0.175 and more
-        did not), rising linearly to 1 as the commanded |turn rate| reaches
-        ``side_step_level_turn_rad_s`` (on tilted soles a turn beside a side step slipped: 2.9 rad in 30 s
-        at 0.2 rad/s, 6.5 level) or as α rises (forward steps beside a side
-        step on tilted soles yawed the base at −0.063 rad/s, level at 0.016-0.020): from
-        ``side_step_level_alpha_from`` to ``side_step_level_alpha_to``."""
+        """The side step's ankle-roll ratio (1: soles level) at the applied α and hip-roll ``amplitude``
+        (rad): ``side_step_ankle_ratio`` for a full side step in place, levelled (each linearly) by a
+        turn command up to ``side_step_level_turn_rad_s``, by α over ``side_step_level_alpha_from/_to``
+        and by an amplitude below ``side_step_tilt_full_rad/_from_rad``. On tilted soles a turn beside a
+        side step slipped, and forward steps or a small amplitude beside it yawed the base
+        (docs/steering.md)."""
         c = self.cfg
-        lo, hi = c.side_step_level_alpha_from, c.side_step_level_alpha_to
-        a0, a1 = c.side_step_tilt_from_rad, c.side_step_tilt_full_rad
-        tilt = (abs(amplitude) - a0) / (a1 - a0)
-        k = max(min(abs(self.turn_rate) / c.side_step_level_turn_rad_s, 1.0),
-                min(max((alpha - lo) / (hi - lo), 0.0), 1.0), 1.0 - min(max(tilt, 0.0), 1.0))
-        return c.side_step_ankle_ratio + (1.0 - c.side_step_ankle_ratio) * k
+        level = max(np.interp(abs(self.turn_rate), (0.0, c.side_step_level_turn_rad_s), (0.0, 1.0)),
+                    np.interp(alpha, (c.side_step_level_alpha_from, c.side_step_level_alpha_to), (0.0, 1.0)),
+                    np.interp(abs(amplitude), (c.side_step_tilt_from_rad, c.side_step_tilt_full_rad),
+                              (1.0, 0.0)))
+        return float(c.side_step_ankle_ratio + (1.0 - c.side_step_ankle_ratio) * level)
 
     # ---- run-time settings
     @property
